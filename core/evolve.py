@@ -1,0 +1,141 @@
+"""evolve: the only way state changes. A fold of events, never a recomputation of perception."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import replace
+from typing import Any
+
+from core.events import (
+    Event,
+    SceneCreated,
+    TrackAdded,
+    TrackConfirmed,
+    TrackDemoted,
+    TrackMoved,
+    TrackRemoved,
+    TrackReparented,
+    TrackUpdated,
+)
+from core.params import Params
+from core.state import SceneState, Track, Vec3
+
+
+def evolve(state: SceneState, event: Event) -> SceneState:
+    """State after one event."""
+    return fold(state, (event,))
+
+
+def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
+    """reduce(evolve, events, state), with one copy of the track table instead of one per event."""
+    tracks = dict(state.tracks)
+    params, name = state.params, state.name
+    head_seq, next_track_number = state.head_seq, state.next_track_number
+    for event in events:
+        head_seq += 1
+        if isinstance(event, SceneCreated):
+            params = Params.from_dict(event.details.get("params"))
+            name = str(event.details.get("name", ""))
+            continue
+        track_id = event.track_id
+        if track_id is None:
+            raise ValueError(f"{event.type} event without a track id")
+        if isinstance(event, TrackAdded):
+            next_track_number += 1
+            tracks[track_id] = _observe(_new_track(track_id, event), event, params)
+            continue
+        track = tracks[track_id]
+        if isinstance(event, TrackUpdated):
+            tracks[track_id] = _apply_update(track, event, params)
+        elif isinstance(event, TrackConfirmed):
+            published = track.published_center or _vec3(event.details["center"])
+            tracks[track_id] = replace(track, lifecycle="confirmed", published_center=published)
+        elif isinstance(event, TrackMoved):
+            tracks[track_id] = replace(track, published_center=_vec3(event.details["to"]))
+        elif isinstance(event, TrackReparented):
+            tracks[track_id] = replace(track, parent=event.details.get("new_parent"))
+        elif isinstance(event, TrackDemoted | TrackRemoved):
+            tracks[track_id] = replace(track, lifecycle=str(event.state))
+        else:
+            raise ValueError(f"no evolve rule for event type {event.type!r}")
+    return SceneState(
+        params=params,
+        name=name,
+        head_seq=head_seq,
+        tracks=tracks,
+        next_track_number=next_track_number,
+    )
+
+
+def _new_track(track_id: str, event: Event) -> Track:
+    first = event.details["observations"][0]
+    return Track(
+        track_id=track_id,
+        kind=str(event.details["kind"]),
+        lifecycle="tentative",
+        class_evidence={},
+        existence_logodds=0.0,
+        center=_vec3(first["center"]),
+        extent=_vec3(first["extent"]),
+        recent_centers=(),
+    )
+
+
+def _apply_update(track: Track, event: Event, params: Params) -> Track:
+    if event.details["evidence"] == "observed":
+        return _observe(track, event, params)
+    # A visibility-admissible miss: only existence and the miss count change.
+    return replace(
+        track,
+        existence_logodds=float(event.details["existence_logodds"]),
+        visible_misses=int(event.details["visible_misses"]),
+        lifecycle=str(event.state),
+    )
+
+
+def _observe(track: Track, event: Event, params: Params) -> Track:
+    """State fusion of a positive batch: evidence, latest center, recent centers, appearance."""
+    details: Mapping[str, Any] = event.details
+    observations = details["observations"]
+    weight = params.fusion.observation_evidence_weight
+    class_evidence = dict(track.class_evidence)
+    parent_evidence = dict(track.parent_evidence)
+    for observation in observations:
+        class_evidence[observation["label"]] = (
+            class_evidence.get(observation["label"], 0.0) + weight
+        )
+        if observation.get("parent") is not None:
+            parent_evidence[observation["parent"]] = (
+                parent_evidence.get(observation["parent"], 0.0) + weight
+            )
+    centers = track.recent_centers + tuple(_vec3(o["center"]) for o in observations)
+    embedding_sum = track.embedding_sum
+    if details.get("embedding_sum") is not None:
+        batch_sum = details["embedding_sum"]
+        embedding_sum = (
+            tuple(float(v) for v in batch_sum)
+            if embedding_sum is None
+            else tuple(a + b for a, b in zip(embedding_sum, batch_sum, strict=True))
+        )
+    last = observations[-1]
+    return replace(
+        track,
+        lifecycle=str(event.state),
+        class_evidence=class_evidence,
+        parent_evidence=parent_evidence,
+        existence_logodds=float(details["existence_logodds"]),
+        center=_vec3(last["center"]),
+        extent=_vec3(last["extent"]),
+        recent_centers=centers[-params.fusion.max_recent_centers :],
+        embedding_sum=embedding_sum,
+        embedding_count=track.embedding_count + int(details.get("embedding_count", 0)),
+        last_observed=float(details["timestamp"]),
+        last_observed_frame=str(last["frame_id"]),
+        batches_observed=int(details["batches_observed"]),
+        visible_misses=0,
+    )
+
+
+def _vec3(values: Any) -> Vec3:
+    x, y, z = values
+    return (float(x), float(y), float(z))

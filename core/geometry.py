@@ -1,0 +1,136 @@
+"""Back-projection, robust proposal centers, box sampling and projection (sections 3.2, 3.3)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+from scipy import ndimage
+
+from core.observation import Detection, Frame, Intrinsics
+from core.params import ProposalParams
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Proposal:
+    """A grounded 3D proposal mu_j from one detection."""
+
+    label: str
+    score: float
+    kind: str
+    center: FloatArray  # (3,) world
+    extent: FloatArray  # (3,) world axis-aligned box size
+    embedding: FloatArray | None  # l2-normalized, or None
+    valid_pixels: int
+    frame_id: str
+    timestamp: float
+
+
+def backproject_pixels(
+    flat_index: npt.NDArray[np.intp], depth_m: FloatArray, intrinsics: Intrinsics
+) -> FloatArray:
+    """Camera-frame points (n, 3) of flat pixel indices with their z-depths."""
+    v, u = np.divmod(flat_index, intrinsics.width)
+    x = (u - intrinsics.cx) / intrinsics.fx * depth_m
+    y = (v - intrinsics.cy) / intrinsics.fy * depth_m
+    return np.column_stack((x, y, depth_m))
+
+
+def camera_to_world(points: FloatArray, pose: FloatArray) -> FloatArray:
+    """Apply T_t (camera-to-world) to camera-frame points (n, 3)."""
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
+def world_to_camera(points: FloatArray, pose: FloatArray) -> FloatArray:
+    """Inverse of `camera_to_world` for a rigid pose."""
+    rotation = pose[:3, :3]
+    return (points - pose[:3, 3]) @ rotation
+
+
+def interior_pixels(mask: npt.NDArray[np.bool_], erosion_px: int) -> npt.NDArray[np.intp]:
+    """Flat indices of the mask eroded by `erosion_px` (computed on the mask's bounding box)."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    if rows.size == 0 or erosion_px <= 0:
+        return np.flatnonzero(mask)
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    crop = np.pad(mask[r0:r1, c0:c1], erosion_px)
+    eroded = ndimage.binary_erosion(crop, iterations=erosion_px)[
+        erosion_px:-erosion_px, erosion_px:-erosion_px
+    ]
+    local_rows, local_cols = np.nonzero(eroded)
+    flat: npt.NDArray[np.intp] = (local_rows + r0) * mask.shape[1] + (local_cols + c0)
+    return flat
+
+
+def robust_depth_inliers(
+    depth_m: FloatArray, reference_depth_m: FloatArray, params: ProposalParams
+) -> npt.NDArray[np.bool_]:
+    """Median/MAD gate on mask depths around a reference: drops background leaked into the mask."""
+    median = float(np.median(reference_depth_m))
+    mad = 1.4826 * float(np.median(np.abs(reference_depth_m - median)))
+    band = max(params.depth_inlier_min_band_m, params.depth_inlier_mad_k * mad)
+    return np.abs(depth_m - median) <= band
+
+
+def ground_detection(
+    detection: Detection,
+    frame: Frame,
+    params: ProposalParams,
+    min_range_m: float,
+    max_range_m: float,
+) -> Proposal | None:
+    """Back-project a mask's valid depth through (K, T); None when valid-depth support is too small."""
+    flat_index = np.flatnonzero(detection.mask)
+    depth_m = frame.depth.reshape(-1)[flat_index].astype(np.float64)
+    in_range = (depth_m >= min_range_m) & (depth_m <= max_range_m)
+    if int(in_range.sum()) < params.min_valid_depth_pixels:
+        return None
+    flat_index, depth_m = flat_index[in_range], depth_m[in_range]
+    # Leakage sits on the mask's rim: anchor the median on the interior when it is large enough.
+    interior_depth = frame.depth.reshape(-1)[interior_pixels(detection.mask, params.boundary_erosion_px)]
+    interior: FloatArray = interior_depth[
+        (interior_depth >= min_range_m) & (interior_depth <= max_range_m)
+    ].astype(np.float64)
+    reference = interior if interior.size >= params.min_interior_pixels else depth_m
+    inliers = robust_depth_inliers(depth_m, reference, params)
+    if int(inliers.sum()) < params.min_valid_depth_pixels:
+        return None
+    points = camera_to_world(
+        backproject_pixels(flat_index[inliers], depth_m[inliers], frame.intrinsics), frame.pose
+    )
+    low, high = np.percentile(points, params.extent_percentiles, axis=0)
+    extent = np.maximum(high - low, params.min_extent_m)
+    embedding = None
+    if detection.embedding is not None:
+        norm = float(np.linalg.norm(detection.embedding))
+        embedding = detection.embedding / norm if norm > 0 else None
+    return Proposal(
+        label=detection.label,
+        score=detection.score,
+        kind=detection.kind,
+        center=np.median(points, axis=0),
+        extent=extent,
+        embedding=embedding,
+        valid_pixels=int(inliers.sum()),
+        frame_id=frame.frame_id,
+        timestamp=frame.timestamp,
+    )
+
+
+def box_samples(centers: FloatArray, extents: FloatArray, per_axis: int) -> FloatArray:
+    """(n, per_axis**3, 3) grid samples of axis-aligned boxes (corners included)."""
+    steps = np.linspace(-0.5, 0.5, per_axis) if per_axis > 1 else np.zeros(1)
+    grid = np.stack(np.meshgrid(steps, steps, steps, indexing="ij"), axis=-1).reshape(-1, 3)
+    return centers[:, None, :] + grid[None, :, :] * extents[:, None, :]
+
+
+def project(points_camera: FloatArray, intrinsics: Intrinsics) -> tuple[FloatArray, FloatArray]:
+    """Pixel coordinates (u, v) of camera-frame points with z > 0."""
+    z = points_camera[..., 2]
+    u = intrinsics.fx * points_camera[..., 0] / z + intrinsics.cx
+    v = intrinsics.fy * points_camera[..., 1] / z + intrinsics.cy
+    return u, v

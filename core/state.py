@@ -1,0 +1,192 @@
+"""The belief b_i of each track (equation (2)) and the scene state the log folds into."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from core.params import Params
+
+Vec3 = tuple[float, float, float]
+SNAPSHOT_FORMAT_VERSION = 1
+
+
+def logistic(logodds: float) -> float:
+    """p from log-odds."""
+    return 1.0 / (1.0 + math.exp(-logodds))
+
+
+@dataclass(frozen=True)
+class Track:
+    """One persistent track: class, existence, geometry, parent, appearance, identity, lifecycle."""
+
+    track_id: str  # the persistent identity h_i
+    kind: str  # "object" or "fixture"
+    lifecycle: str  # s_i^life: tentative | confirmed | demoted | removed
+    class_evidence: Mapping[str, float]  # accumulated class evidence, normalized into p_cls
+    existence_logodds: float  # l_i of equation (3)
+    center: Vec3  # mu_i: the latest accepted center for dynamic objects
+    extent: Vec3  # stored world-frame box size used by the visibility gate
+    recent_centers: tuple[Vec3, ...]  # at most 32, for Sigma_i
+    parent_evidence: Mapping[str, float] = field(default_factory=dict)
+    parent: str | None = None
+    embedding_sum: tuple[float, ...] | None = None  # appearance a_i = sum / ||sum||
+    embedding_count: int = 0
+    last_observed: float | None = None  # tau_i: last reliable observation time
+    last_observed_frame: str | None = None
+    batches_observed: int = 0  # distinct positive batches since (re)acquisition
+    visible_misses: int = 0  # visibility-admissible misses since the last positive batch
+    published_center: Vec3 | None = None  # where the graph last said the track is
+
+    @property
+    def label(self) -> str:
+        """Most supported class; ties broken by name so the choice is deterministic."""
+        return min(self.class_evidence.items(), key=lambda item: (-item[1], item[0]))[0]
+
+    @property
+    def p_exist(self) -> float:
+        """p_i^exist."""
+        return logistic(self.existence_logodds)
+
+    def class_probabilities(self) -> dict[str, float]:
+        """p_i^cls: class evidence normalized."""
+        total = sum(self.class_evidence.values())
+        return {label: weight / total for label, weight in sorted(self.class_evidence.items())}
+
+    def parent_probabilities(self) -> dict[str, float]:
+        """p_i^parent: parent evidence normalized (empty while no support is known)."""
+        total = sum(self.parent_evidence.values())
+        if total <= 0:
+            return {}
+        return {parent: weight / total for parent, weight in sorted(self.parent_evidence.items())}
+
+    def embedding(self) -> npt.NDArray[np.float64] | None:
+        """Appearance averaged by observation count, then l2-normalized."""
+        if self.embedding_sum is None:
+            return None
+        vector = np.asarray(self.embedding_sum, dtype=np.float64)
+        norm = float(np.linalg.norm(vector))
+        return vector / norm if norm > 0 else None
+
+    def covariance(self) -> list[list[float]]:
+        """Sigma_i over the recent centers (zero until two centers exist)."""
+        if len(self.recent_centers) < 2:
+            return [[0.0] * 3 for _ in range(3)]
+        matrix = np.cov(np.asarray(self.recent_centers, dtype=np.float64).T)
+        return [[float(v) for v in row] for row in matrix]
+
+    def to_dict(self) -> dict[str, Any]:
+        """Canonical JSON-able form (snapshots, equality in tests)."""
+        return {
+            "track_id": self.track_id,
+            "kind": self.kind,
+            "lifecycle": self.lifecycle,
+            "class_evidence": dict(sorted(self.class_evidence.items())),
+            "existence_logodds": self.existence_logodds,
+            "center": list(self.center),
+            "extent": list(self.extent),
+            "recent_centers": [list(c) for c in self.recent_centers],
+            "parent_evidence": dict(sorted(self.parent_evidence.items())),
+            "parent": self.parent,
+            "embedding_sum": None if self.embedding_sum is None else list(self.embedding_sum),
+            "embedding_count": self.embedding_count,
+            "last_observed": self.last_observed,
+            "last_observed_frame": self.last_observed_frame,
+            "batches_observed": self.batches_observed,
+            "visible_misses": self.visible_misses,
+            "published_center": None
+            if self.published_center is None
+            else list(self.published_center),
+        }
+
+    @classmethod
+    def from_dict(cls, record: Mapping[str, Any]) -> Track:
+        """Inverse of `to_dict`."""
+        embedding_sum = record["embedding_sum"]
+        published = record["published_center"]
+        return cls(
+            track_id=record["track_id"],
+            kind=record["kind"],
+            lifecycle=record["lifecycle"],
+            class_evidence=dict(record["class_evidence"]),
+            existence_logodds=float(record["existence_logodds"]),
+            center=_vec3(record["center"]),
+            extent=_vec3(record["extent"]),
+            recent_centers=tuple(_vec3(c) for c in record["recent_centers"]),
+            parent_evidence=dict(record["parent_evidence"]),
+            parent=record["parent"],
+            embedding_sum=None if embedding_sum is None else tuple(embedding_sum),
+            embedding_count=int(record["embedding_count"]),
+            last_observed=record["last_observed"],
+            last_observed_frame=record["last_observed_frame"],
+            batches_observed=int(record["batches_observed"]),
+            visible_misses=int(record["visible_misses"]),
+            published_center=None if published is None else _vec3(published),
+        )
+
+
+def _vec3(values: Any) -> Vec3:
+    x, y, z = values
+    return (float(x), float(y), float(z))
+
+
+@dataclass(frozen=True)
+class TrackArrays:
+    """Column view of the live tracks, built once per state for vectorized gates."""
+
+    track_ids: tuple[str, ...]
+    centers: npt.NDArray[np.float64]  # (n, 3)
+    extents: npt.NDArray[np.float64]  # (n, 3)
+
+
+@dataclass(frozen=True)
+class SceneState:
+    """M_t: the persistent track table, plus what the log says about the scene itself."""
+
+    params: Params = field(default_factory=Params)
+    name: str = ""
+    head_seq: int = -1  # seq of the last event folded in; scene_created is seq 0
+    tracks: Mapping[str, Track] = field(default_factory=dict)
+    next_track_number: int = 1
+
+    @cached_property
+    def arrays(self) -> TrackArrays:
+        """Centers and extents of every track in id order (removed ones included)."""
+        ids = tuple(sorted(self.tracks))
+        if not ids:
+            empty = np.zeros((0, 3), dtype=np.float64)
+            return TrackArrays(ids, empty, empty)
+        centers = np.array([self.tracks[i].center for i in ids], dtype=np.float64)
+        extents = np.array([self.tracks[i].extent for i in ids], dtype=np.float64)
+        return TrackArrays(ids, centers, extents)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Canonical JSON-able form: snapshots store it, tests compare it."""
+        return {
+            "format_version": SNAPSHOT_FORMAT_VERSION,
+            "params": self.params.to_dict(),
+            "name": self.name,
+            "head_seq": self.head_seq,
+            "next_track_number": self.next_track_number,
+            "tracks": [self.tracks[i].to_dict() for i in sorted(self.tracks)],
+        }
+
+    @classmethod
+    def from_dict(cls, record: Mapping[str, Any]) -> SceneState:
+        """Inverse of `to_dict`; a different format version raises ValueError."""
+        if record.get("format_version") != SNAPSHOT_FORMAT_VERSION:
+            raise ValueError(f"snapshot format {record.get('format_version')} is not supported")
+        tracks = {t["track_id"]: Track.from_dict(t) for t in record["tracks"]}
+        return cls(
+            params=Params.from_dict(record["params"]),
+            name=record["name"],
+            head_seq=int(record["head_seq"]),
+            tracks=tracks,
+            next_track_number=int(record["next_track_number"]),
+        )

@@ -1,0 +1,204 @@
+"""Section 3.3 rules on analytic frames: confirmation, visibility-gated removal, identity."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from core.decide import decide
+from core.evolve import fold
+from core.params import Params
+from core.state import SceneState
+from tests.core.scenes import look_pose, scene_batch
+
+MUG = {"mug_1": ((0.2, 0.1, 2.0), 0.1)}
+
+
+def run(state, batches):
+    """Fold each batch's events into the state; return the state and the events per batch."""
+    per_batch = []
+    for batch in batches:
+        events = decide(state, batch)
+        state = fold(state, events)
+        per_batch.append(events)
+    return state, per_batch
+
+
+def types(events):
+    return [e.type for e in events]
+
+
+def test_first_sighting_is_a_hypothesis_and_second_batch_confirms():
+    state, per_batch = run(SceneState(), [scene_batch("b0", MUG), scene_batch("b1", MUG)])
+    assert types(per_batch[0]) == ["add"]
+    assert per_batch[0][0].state == "tentative"
+    assert types(per_batch[1]) == ["update", "confirm"]
+    track = state.tracks["trk-000001"]
+    assert track.lifecycle == "confirmed"
+    assert track.p_exist >= 0.72
+    # the median of the visible front face sits within half the cube of the true center
+    assert math.dist(track.center, (0.2, 0.1, 2.0)) < 0.06
+
+
+def test_two_frames_of_one_batch_confirm_nothing():
+    """Cross-batch confirmation: two sightings in one batch are one batch."""
+    batch = scene_batch("b0", MUG)
+    double = type(batch)("b0", (batch.frames[0], batch.frames[0]))
+    state, per_batch = run(SceneState(), [double])
+    assert types(per_batch[0]) == ["add"]
+    assert state.tracks["trk-000001"].batches_observed == 1
+    assert len(per_batch[0][0].details["observations"]) == 2
+
+
+def test_taken_away_in_view_is_removed_after_visible_misses():
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    state, per_batch = run(state, [scene_batch(f"m{i}", MUG, detect=set()) for i in range(15)])
+    flat = [e for events in per_batch for e in events]
+    removed = [e for e in flat if e.type == "remove"]
+    assert len(removed) == 1
+    misses = [e for e in flat if e.type == "update" and e.details["evidence"] == "visible_miss"]
+    assert len(misses) >= 3
+    assert removed[0].details["p_exist"] <= 0.12
+    assert types(flat).index("demote") < types(flat).index("remove")
+    assert state.tracks["trk-000001"].lifecycle == "removed"
+
+
+def test_removal_needs_three_visible_misses_even_when_p_is_low():
+    params = Params.from_dict({"existence": {"eta_missed": 5.0}})
+    state = SceneState(params=params)
+    state, _ = run(state, [scene_batch(f"b{i}", MUG) for i in range(2)])
+    state, per_batch = run(state, [scene_batch(f"m{i}", MUG, detect=set()) for i in range(3)])
+    assert "remove" not in types(per_batch[0]) + types(per_batch[1])
+    assert "remove" in types(per_batch[2])
+
+
+def test_occluded_object_gets_no_negative_evidence():
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    before = state.tracks["trk-000001"]
+    occluder = ((0.2, 0.1, 1.2), 0.5)  # undetected, closer than the mug, covers it
+    state, per_batch = run(
+        state, [scene_batch(f"o{i}", MUG, detect=set(), occluders=[occluder]) for i in range(30)]
+    )
+    assert all(events == [] for events in per_batch)
+    after = state.tracks["trk-000001"]
+    assert after.existence_logodds == before.existence_logodds
+    assert after.visible_misses == 0 and after.lifecycle == "confirmed"
+
+
+def test_out_of_view_object_gets_no_negative_evidence():
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    before = state.tracks["trk-000001"].existence_logodds
+    away = look_pose(120.0)
+    state, per_batch = run(state, [scene_batch(f"a{i}", {}, pose=away) for i in range(30)])
+    assert all(events == [] for events in per_batch)
+    assert state.tracks["trk-000001"].existence_logodds == before
+
+
+def test_small_motion_emits_move_with_same_identity():
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    moved = {"mug_1": ((0.7, 0.1, 2.0), 0.1)}
+    state, per_batch = run(state, [scene_batch("mv", moved)])
+    assert types(per_batch[0]) == ["update", "move"]
+    move = per_batch[0][1]
+    assert move.track_id == "trk-000001"
+    assert move.details["distance"] >= 0.35
+    assert list(state.tracks) == ["trk-000001"]
+
+
+def test_large_motion_recovers_identity_by_unique_class_fallback():
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    far = {"mug_1": ((-0.6, 0.1, 1.5), 0.1)}  # about 0.94 m away: beyond the 0.8 m gate
+    state, per_batch = run(state, [scene_batch("far", far)])
+    assert types(per_batch[0]) == ["update", "move"]
+    assert list(state.tracks) == ["trk-000001"]
+
+
+def test_fallback_refuses_when_appearance_conflicts():
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=16), rng.normal(size=16)
+    state, _ = run(
+        SceneState(), [scene_batch(f"b{i}", MUG, embeddings={"mug_1": a}) for i in range(3)]
+    )
+    far = {"mug_1": ((-0.6, 0.1, 1.5), 0.1)}
+    state, per_batch = run(state, [scene_batch("far", far, embeddings={"mug_1": b})])
+    assert "add" in types(per_batch[0])
+    assert len(state.tracks) == 2
+
+
+def test_appearance_gate_separates_two_nearby_instances_of_one_class():
+    rng = np.random.default_rng(5)
+    a, b = rng.normal(size=16), rng.normal(size=16)
+    objects = {"mug_1": ((0.0, 0.1, 2.0), 0.1), "mug_2": ((0.3, 0.1, 2.0), 0.1)}
+    embeddings = {"mug_1": a, "mug_2": b}
+    state, _ = run(
+        SceneState(), [scene_batch(f"b{i}", objects, embeddings=embeddings) for i in range(2)]
+    )
+    swapped = {"mug_1": ((0.3, 0.1, 2.0), 0.1), "mug_2": ((0.0, 0.1, 2.0), 0.1)}
+    state, per_batch = run(state, [scene_batch("swap", swapped, embeddings=embeddings)])
+    # each identity follows its appearance, so both moved 0.3 m (no move event below 0.35 m)
+    by_id = {t.track_id: t for t in state.tracks.values()}
+    assert len(by_id) == 2
+    first, second = by_id["trk-000001"], by_id["trk-000002"]
+    assert abs(first.center[0] - second.center[0]) > 0.2
+    assert {round(first.center[0], 1), round(second.center[0], 1)} == {0.0, 0.3}
+    assert all(e.type == "update" for e in per_batch[0])
+
+
+def test_removed_track_regains_identity_on_reassociation():
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    state, _ = run(state, [scene_batch(f"m{i}", MUG, detect=set()) for i in range(12)])
+    assert state.tracks["trk-000001"].lifecycle == "removed"
+    state, per_batch = run(state, [scene_batch(f"r{i}", MUG) for i in range(2)])
+    assert per_batch[0][0].details["reacquired"] is True
+    assert types(per_batch[1]) == ["update", "confirm"]
+    assert list(state.tracks) == ["trk-000001"]
+    assert state.tracks["trk-000001"].lifecycle == "confirmed"
+
+
+def test_clamp_keeps_a_long_seen_object_removable():
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(60)])
+    assert state.tracks["trk-000001"].existence_logodds == state.params.existence.logodds_max
+    state, per_batch = run(state, [scene_batch(f"m{i}", MUG, detect=set()) for i in range(15)])
+    removal_batch = next(i for i, events in enumerate(per_batch) if "remove" in types(events))
+    assert removal_batch + 1 == 9  # ceil((4 + logit(0.88)) / 0.7)
+
+
+def test_mask_with_too_little_valid_depth_is_rejected():
+    batch = scene_batch("b0", {"mug_1": ((0.2, 0.1, 2.0), 0.02)})  # a few pixels only
+    assert decide(SceneState(), batch) == []
+
+
+def test_boundary_leak_does_not_drag_the_center():
+    # 9 px of cube and a 2 px rim of wall: more leaked pixels than object pixels
+    batch = scene_batch("b0", {"mug_1": ((0.2, 0.1, 2.0), 0.14)})
+    frame = batch.frames[0]
+    leaked = np.zeros_like(frame.detections[0].mask)
+    rows, cols = np.nonzero(frame.detections[0].mask)
+    leaked[rows.min() - 2 : rows.max() + 3, cols.min() - 2 : cols.max() + 3] = (
+        True  # bleeds onto the wall
+    )
+    detection = type(frame.detections[0])("mug", 0.9, "object", leaked)
+    leaky = type(batch)(
+        "b0",
+        (
+            type(frame)(
+                frame.frame_id, 0.0, frame.intrinsics, frame.pose, frame.depth, (detection,)
+            ),
+        ),
+    )
+    events = decide(SceneState(), leaky)
+    center = events[0].details["observations"][0]["center"]
+    assert np.count_nonzero(leaked) > 2 * np.count_nonzero(frame.detections[0].mask) - 10
+    assert math.dist(center, (0.2, 0.1, 1.93)) < 0.03
+
+
+def test_decide_is_deterministic():
+    batches = [scene_batch(f"b{i}", MUG) for i in range(3)]
+    first = [
+        [(e.type, e.track_id, dict(e.details)) for e in ev] for ev in run(SceneState(), batches)[1]
+    ]
+    second = [
+        [(e.type, e.track_id, dict(e.details)) for e in ev] for ev in run(SceneState(), batches)[1]
+    ]
+    assert first == second
