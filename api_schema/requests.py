@@ -1,0 +1,189 @@
+"""Request bodies of the v1 HTTP API: structural checks only (decoding lives in service.codec)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    Strict,
+    WithJsonSchema,
+    field_validator,
+)
+from pydantic_core import PydanticCustomError
+
+# Strict numbers: the body is JSON, so "525" or true where a number belongs is a client bug,
+# not something to coerce silently.
+FiniteNumber = Annotated[float, Strict(), Field(allow_inf_nan=False)]
+PositiveNumber = Annotated[float, Strict(), Field(gt=0, allow_inf_nan=False)]
+# 8192 px per side bounds decoding work and stays under Pillow's decompression-bomb threshold.
+MAX_IMAGE_SIDE = 8192
+ImageSide = Annotated[int, Strict(), Field(gt=0, le=MAX_IMAGE_SIDE)]
+PoseRow = Annotated[list[FiniteNumber], Field(min_length=4, max_length=4)]
+NonEmptyLabel = Annotated[str, Field(min_length=1, max_length=200)]
+
+
+def _check_rle_counts(value: object) -> str | list[int]:
+    """Accept a compressed RLE string or a list of non-negative ints, with one plain error."""
+    # A hand-written check instead of `str | list[int]`: pydantic would report union failures
+    # under member tags (`counts.list[int][3]`), which are not paths a client can act on.
+    if isinstance(value, str):
+        return value
+    if isinstance(value, list) and all(type(count) is int and count >= 0 for count in value):
+        return value
+    raise PydanticCustomError(
+        "rle_counts",
+        "counts must be a compressed COCO RLE string or a list of non-negative integers",
+    )
+
+
+RleCounts = Annotated[
+    str | list[int],
+    PlainValidator(_check_rle_counts),
+    WithJsonSchema(
+        {
+            "anyOf": [
+                {"type": "string"},
+                {"type": "array", "items": {"type": "integer", "minimum": 0}},
+            ]
+        }
+    ),
+]
+
+
+class SceneCreate(BaseModel):
+    """Body of `POST /v1/scenes`."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    name: str = Field(min_length=1, max_length=200, description="Human-readable scene name.")
+    params: dict[str, Any] | None = Field(
+        None,
+        description="Overrides of the method's default parameters (a partial nested object); "
+        "recorded in the scene's log.",
+    )
+
+
+class Intrinsics(BaseModel):
+    """Pinhole intrinsics of one frame, in pixels."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    width: ImageSide = Field(description="Image width in pixels.")
+    height: ImageSide = Field(description="Image height in pixels.")
+    fx: PositiveNumber = Field(description="Focal length along x, in pixels.")
+    fy: PositiveNumber = Field(description="Focal length along y, in pixels.")
+    cx: FiniteNumber = Field(description="Principal point x, in pixels.")
+    cy: FiniteNumber = Field(description="Principal point y, in pixels.")
+
+
+class DepthImage(BaseModel):
+    """One depth image, base64-encoded."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    encoding: Literal["png16", "f32"] = Field(
+        description=(
+            "`png16`: a 16-bit single-channel PNG, pixel value x scale = metres, 0 = invalid. "
+            "`f32`: little-endian float32 metres, row-major, 0 or NaN = invalid."
+        )
+    )
+    scale: PositiveNumber = Field(
+        default=0.001,
+        description="Metres per PNG unit for `png16` (0.001 = millimetres); ignored for `f32`.",
+    )
+    data: str = Field(min_length=1, description="Base64 of the PNG file or of the float32 bytes.")
+
+
+class RleMask(BaseModel):
+    """A binary mask in COCO run-length encoding (column-major, as pycocotools writes it)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    size: Annotated[list[ImageSide], Field(min_length=2, max_length=2)] = Field(
+        description="[height, width] of the mask; must equal the depth image size."
+    )
+    counts: RleCounts = Field(
+        description=(
+            "Run lengths: a compressed COCO RLE string, or a list of integers "
+            "(uncompressed RLE) summing to height x width."
+        )
+    )
+
+
+class DetectionIn(BaseModel):
+    """One 2D detection in a frame."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    label: NonEmptyLabel = Field(description="Top class label from the detector.")
+    score: Annotated[float, Strict(), Field(ge=0, le=1, allow_inf_nan=False)] = Field(
+        description="Detector confidence of the label, in [0, 1]."
+    )
+    kind: Literal["object", "fixture"] = Field(
+        default="object",
+        description="`object` for movable things, `fixture` for furniture and structure.",
+    )
+    mask: RleMask = Field(description="Instance mask, the size of the frame's depth image.")
+    embedding: Annotated[list[FiniteNumber], Field(min_length=1)] | None = Field(
+        default=None, description="Optional appearance embedding (raw, not normalized)."
+    )
+    class_scores: dict[NonEmptyLabel, FiniteNumber] | None = Field(
+        default=None, description="Optional scores of alternative labels, by label."
+    )
+
+
+class FrameIn(BaseModel):
+    """One posed RGB-D frame: depth plus detections."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    frame_id: NonEmptyLabel = Field(description="Client frame identifier, unique in the batch.")
+    timestamp: FiniteNumber = Field(description="Capture time of the frame, in seconds.")
+    intrinsics: Intrinsics = Field(description="Pinhole intrinsics of the depth image.")
+    pose: Annotated[list[PoseRow], Field(min_length=4, max_length=4)] = Field(
+        description=(
+            "4x4 camera-to-world rigid transform, row-major, metres, OpenCV camera axes "
+            "(x right, y down, z forward)."
+        )
+    )
+    depth: DepthImage = Field(description="Depth image registered to the detections.")
+    detections: list[DetectionIn] = Field(
+        default_factory=list, description="Detections in this frame (may be empty)."
+    )
+
+
+class BatchIn(BaseModel):
+    """Body of `POST /v1/scenes/{scene_id}/batches`: one semantic update batch."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    batch_id: str = Field(
+        min_length=1,
+        max_length=200,
+        pattern=r"^[A-Za-z0-9._:-]+$",
+        description="Client-chosen idempotency key: re-posting the same batch is a no-op.",
+    )
+    frames: list[FrameIn] = Field(min_length=1, description="Frames of the batch, at least one.")
+
+    @field_validator("frames")
+    @classmethod
+    def _frame_ids_unique(cls, frames: list[FrameIn]) -> list[FrameIn]:
+        """Reject a batch that names the same frame twice."""
+        first_index: dict[str, int] = {}
+        for index, frame in enumerate(frames):
+            if frame.frame_id in first_index:
+                raise PydanticCustomError(
+                    "duplicate_frame_id",
+                    "frame_id '{frame_id}' is used by both frames[{first}] and frames[{again}]",
+                    {
+                        "frame_id": frame.frame_id,
+                        "first": first_index[frame.frame_id],
+                        "again": index,
+                    },
+                )
+            first_index[frame.frame_id] = index
+        return frames

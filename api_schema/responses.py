@@ -1,0 +1,166 @@
+"""Response models of the v1 API."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, Field
+
+BatchStatusName = Literal["queued", "running", "done", "failed", "dead"]
+
+
+class Scene(BaseModel):
+    """A scene and the head of its log."""
+
+    id: str = Field(description="Scene id.")
+    name: str = Field(description="Human-readable name.")
+    head_seq: int = Field(description="Seq of the newest event; 0 is the scene's creation.")
+    created_at: float = Field(description="Unix seconds.")
+    params: dict[str, Any] = Field(
+        description="The method parameters the scene's events are decided with."
+    )
+
+
+class SceneList(BaseModel):
+    """Every scene."""
+
+    scenes: list[Scene]
+
+
+class BatchStatus(BaseModel):
+    """Where a posted batch is in the queue, and the events it appended."""
+
+    batch_id: str
+    scene_id: str
+    status: BatchStatusName = Field(
+        description="queued, running, done, failed (will retry) or dead."
+    )
+    attempts: int
+    frame_count: int
+    content_sha256: str
+    first_seq: int | None = Field(
+        description="First event appended by this batch (null until done)."
+    )
+    last_seq: int | None = Field(description="Last event appended by this batch (null until done).")
+    error: str | None = Field(description="Why the last attempt failed.")
+    received_at: float
+    finished_at: float | None
+
+
+class GraphNode(BaseModel):
+    """One track as a graph node."""
+
+    id: str
+    kind: str
+    label: str
+    state: str = Field(description="tentative, confirmed, demoted or removed.")
+    p_exist: float
+    center: list[float] = Field(description="[x, y, z] in metres, world frame.")
+    extent: list[float] = Field(description="[dx, dy, dz] of the stored box, metres.")
+    parent: str | None = Field(description="Support parent track id.")
+    class_probabilities: dict[str, float]
+    last_observed: float | None = Field(description="Timestamp of the last reliable observation.")
+    last_observed_frame: str | None
+
+
+class GraphEdge(BaseModel):
+    """object -on-> support."""
+
+    source: str
+    target: str
+    relation: str
+
+
+class Graph(BaseModel):
+    """The published graph at `seq`."""
+
+    scene_id: str
+    seq: int
+    nodes: list[GraphNode]
+    edges: list[GraphEdge]
+
+
+class EventOut(BaseModel):
+    """One event of the log."""
+
+    seq: int
+    type: str
+    track_id: str | None
+    state: str | None
+    batch_id: str | None
+    frame_id: str | None
+    recorded_at: float
+    details: dict[str, Any]
+
+
+class EventPage(BaseModel):
+    """A page of events; pass `next_after` as `after` for the next page (null at the end)."""
+
+    events: list[EventOut]
+    next_after: int | None
+
+
+class TrackBelief(BaseModel):
+    """The full belief b_i of one track (equation (2)) at `seq`."""
+
+    scene_id: str
+    seq: int
+    track_id: str
+    kind: str
+    label: str
+    state: str
+    p_exist: float
+    existence_logodds: float
+    class_probabilities: dict[str, float]
+    class_evidence: dict[str, float]
+    center: list[float]
+    covariance: list[list[float]] = Field(description="Of at most the 32 most recent centers.")
+    extent: list[float]
+    recent_centers: list[list[float]]
+    parent: str | None
+    parent_probabilities: dict[str, float]
+    embedding: list[float] | None = Field(
+        description="Appearance, count-averaged and l2-normalized."
+    )
+    embedding_count: int
+    last_observed: float | None
+    last_observed_frame: str | None
+    batches_observed: int
+    visible_misses: int
+    published_center: list[float] | None
+
+
+class VisibleMiss(BaseModel):
+    """One visibility-admissible miss that lowered p_exist."""
+
+    seq: int
+    frame_id: str | None
+    samples_passed: int
+    p_exist_after: float
+
+
+class Removal(BaseModel):
+    """The removal and the evidence behind it."""
+
+    seq: int
+    frame_id: str | None
+    p_exist: float
+    visible_misses: list[VisibleMiss]
+
+
+class Explanation(BaseModel):
+    """Why a track is in its state, from the log alone."""
+
+    track_id: str
+    state: str
+    summary: str = Field(description="One plain sentence.")
+    events: list[EventOut]
+    removal: Removal | None
+
+
+class Health(BaseModel):
+    """Liveness and the queue at a glance."""
+
+    status: Literal["ok"]
+    database: str
+    batches: dict[str, int]

@@ -1,0 +1,1 @@
+"""PBD-AG HTTP service: FastAPI app, persistence, and the wire <-> domain codec."""

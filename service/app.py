@@ -1,0 +1,61 @@
+"""The FastAPI application: routers, problem+json errors, body limit, optional in-process worker."""
+
+from __future__ import annotations
+
+from collections.abc import AsyncIterator
+from contextlib import asynccontextmanager
+
+from fastapi import FastAPI
+from fastapi.responses import ORJSONResponse
+
+from api_schema import Health
+from service.bootstrap import Container, build_container
+from service.errors import BodySizeLimit, install_problem_handlers
+from service.routes import batches, events, graph, scenes, tracks
+from service.states import StateReader
+from service.worker import WorkerThread
+
+API_VERSION = "1.0.0"
+
+
+def create_app(container: Container | None = None, *, run_worker: bool = False) -> FastAPI:
+    """The service; with `run_worker` a worker thread processes the queue in this process."""
+    container = container or build_container()
+
+    @asynccontextmanager
+    async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
+        worker = WorkerThread(container) if run_worker else None
+        if worker is not None:
+            worker.start()
+        try:
+            yield
+        finally:
+            if worker is not None:
+                worker.close()
+
+    app = FastAPI(
+        title="PBD-AG scene memory",
+        version=API_VERSION,
+        description=(
+            "Long-term memory of a service robot: posted RGB-D observations become a persistent "
+            "3D scene graph kept as an append-only log of typed events, with time travel (`as_of`) "
+            "and explanations of every removal."
+        ),
+        default_response_class=ORJSONResponse,
+        lifespan=lifespan,
+    )
+    app.state.container = container
+    app.state.states = StateReader(container.log)
+    install_problem_handlers(app)
+    app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
+    for module in (scenes, batches, graph, events, tracks):
+        app.include_router(module.router)
+
+    @app.get("/healthz", response_model=Health, tags=["health"])
+    def healthz() -> Health:
+        """Liveness, the database backend, and batches per status."""
+        return Health(
+            status="ok", database=container.engine.dialect.name, batches=container.queue.counts()
+        )
+
+    return app

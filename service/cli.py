@@ -1,0 +1,129 @@
+"""`pbdag`: serve the API, run workers, migrate, rebuild projections, export the OpenAPI file."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import signal
+import sys
+import threading
+from pathlib import Path
+
+from service.settings import Settings
+
+OPENAPI_PATH = Path(__file__).resolve().parents[1] / "api_schema" / "openapi.json"
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the `pbdag` command."""
+    parser = argparse.ArgumentParser(prog="pbdag", description=__doc__)
+    commands = parser.add_subparsers(dest="command", required=True)
+
+    serve = commands.add_parser("serve", help="run the HTTP API (with an in-process worker by default)")
+    serve.add_argument("--host", default="127.0.0.1")
+    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--no-worker", action="store_true", help="API only; run `pbdag worker` separately")
+
+    worker = commands.add_parser("worker", help="process queued batches (several may share one PostgreSQL)")
+    worker.add_argument("--drain", action="store_true", help="exit once the queue is empty")
+
+    commands.add_parser("migrate", help="create or upgrade the database schema")
+
+    rebuild = commands.add_parser("rebuild", help="drop every projection, rebuild it from the log, report differences")
+    rebuild.add_argument("--scene", action="append", help="only these scenes (repeatable)")
+
+    openapi = commands.add_parser("openapi", help="write the OpenAPI document")
+    openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
+
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    handlers = {
+        "serve": _serve,
+        "worker": _worker,
+        "migrate": _migrate,
+        "rebuild": _rebuild,
+        "openapi": _openapi,
+    }
+    return handlers[args.command](args)
+
+
+def _serve(args: argparse.Namespace) -> int:
+    import uvicorn
+
+    from service.app import create_app
+
+    settings = Settings()
+    print(f"pbdag: database {_redacted(settings.resolved_database_url())}, data in {settings.data_dir.resolve()}")
+    print(f"pbdag: API on http://{args.host}:{args.port} (docs at /docs)", flush=True)
+    app = create_app(run_worker=not args.no_worker)
+    uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
+    return 0
+
+
+def _worker(args: argparse.Namespace) -> int:
+    from service.bootstrap import build_container
+    from service.worker import Worker
+
+    container = build_container()
+    worker = Worker(container)
+    if args.drain:
+        processed = worker.drain()
+        print(f"pbdag worker {worker.name}: processed {processed} batches")
+        return 0
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    worker.run(stop)
+    return 0
+
+
+def _migrate(_args: argparse.Namespace) -> int:
+    from service.bootstrap import build_container
+
+    container = build_container()
+    print(f"pbdag: schema of {_redacted(container.settings.resolved_database_url())} is up to date")
+    return 0
+
+
+def _rebuild(args: argparse.Namespace) -> int:
+    from service.bootstrap import build_container
+    from service.store.projection import rebuild_scene
+
+    container = build_container()
+    scene_ids = args.scene or [scene.id for scene in container.log.scenes()]
+    differed = False
+    for scene_id in scene_ids:
+        report = rebuild_scene(container.log, scene_id)
+        verdict = "identical" if report.identical else "DIFFERED"
+        print(
+            f"{scene_id}: {report.events} events replayed; tracks and snapshots {verdict}"
+            + (f" (tracks {report.tracks_differ}, snapshots {report.snapshots_differ})" if not report.identical else "")
+        )
+        differed |= not report.identical
+    print("rebuild: projections differed from the log" if differed else "rebuild: no difference")
+    return 1 if differed else 0
+
+
+def _openapi(args: argparse.Namespace) -> int:
+    from service.app import create_app
+    from service.bootstrap import build_container
+    from service.store.blobs import MemoryBlobStore
+    from service.store.engine import make_engine
+
+    container = build_container(Settings(), blobs=MemoryBlobStore(), engine=make_engine("sqlite://"))
+    document = create_app(container).openapi()
+    args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _redacted(url: str) -> str:
+    """The URL without its password."""
+    from sqlalchemy import make_url
+
+    return make_url(url).render_as_string(hide_password=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,275 @@
+"""Wire -> domain: decode a validated `BatchIn` into `core.observation` arrays."""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import hashlib
+import io
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import orjson
+from PIL import Image
+
+from api_schema import BatchIn, DepthImage, DetectionIn, FrameIn, RleMask
+from core.observation import Batch, Detection, Frame, Intrinsics
+
+__all__ = [
+    "InvalidObservation",
+    "compressed_rle_counts",
+    "content_sha256",
+    "decode_batch",
+    "rle_runs_to_mask",
+]
+
+SIXTEEN_BIT_PNG_MODES = frozenset({"I;16", "I;16B", "I"})
+# Tolerances of the rigid-pose check: float32 round trips on the client stay well inside them.
+POSE_LAST_ROW_ATOL = 1e-6
+ROTATION_ATOL = 1e-4
+
+
+class InvalidObservation(Exception):
+    """A structurally valid observation whose content cannot be decoded or is not physical."""
+
+    def __init__(self, field: str, reason: str) -> None:
+        super().__init__(f"{field}: {reason}")
+        self.field = field
+        self.reason = reason
+
+
+def canonical_json(body: dict[str, Any]) -> bytes:
+    """The canonical JSON of `body` (sorted keys, no whitespace): what a batch's blob holds."""
+    return orjson.dumps(body, option=orjson.OPT_SORT_KEYS)
+
+
+def content_sha256(body: dict[str, Any]) -> str:
+    """Hex sha256 of the canonical JSON of `body`."""
+    return hashlib.sha256(canonical_json(body)).hexdigest()
+
+
+def decode_batch(batch: BatchIn) -> Batch:
+    """Decode every frame of a batch; raise `InvalidObservation` on the first bad field."""
+    frames = tuple(
+        _decode_frame(frame, f"frames[{index}]") for index, frame in enumerate(batch.frames)
+    )
+    return Batch(batch_id=batch.batch_id, frames=frames)
+
+
+def _decode_frame(frame: FrameIn, path: str) -> Frame:
+    """Decode one frame: pose, depth, then each detection against the depth size."""
+    intrinsics = Intrinsics(**frame.intrinsics.model_dump())
+    pose = _decode_pose(frame.pose, f"{path}.pose")
+    depth = _decode_depth(frame.depth, (intrinsics.height, intrinsics.width), f"{path}.depth")
+    detections = tuple(
+        _decode_detection(detection, depth.shape, f"{path}.detections[{index}]")
+        for index, detection in enumerate(frame.detections)
+    )
+    return Frame(
+        frame_id=frame.frame_id,
+        timestamp=frame.timestamp,
+        intrinsics=intrinsics,
+        pose=pose,
+        depth=depth,
+        detections=detections,
+    )
+
+
+def _decode_pose(rows: list[list[float]], path: str) -> npt.NDArray[np.float64]:
+    """Check that the 4x4 matrix is a finite rigid transform (rotation + translation)."""
+    try:
+        pose = np.array(rows, dtype=np.float64)
+    except (TypeError, ValueError) as error:
+        raise InvalidObservation(path, "must be a 4x4 matrix of numbers") from error
+    if pose.shape != (4, 4):
+        raise InvalidObservation(path, f"must be a 4x4 matrix, got shape {list(pose.shape)}")
+    if not np.isfinite(pose).all():
+        raise InvalidObservation(path, "contains NaN or infinite values")
+    if not np.allclose(pose[3], (0.0, 0.0, 0.0, 1.0), rtol=0.0, atol=POSE_LAST_ROW_ATOL):
+        raise InvalidObservation(path, f"last row must be [0, 0, 0, 1], got {pose[3].tolist()}")
+    rotation = pose[:3, :3]
+    orthonormality_error = float(np.abs(rotation.T @ rotation - np.eye(3)).max())
+    if orthonormality_error > ROTATION_ATOL:
+        raise InvalidObservation(
+            path,
+            "rotation part is not orthonormal "
+            f"(max |R^T R - I| = {orthonormality_error:.3g}, tolerance {ROTATION_ATOL:g})",
+        )
+    determinant = float(np.linalg.det(rotation))
+    if abs(determinant - 1.0) > ROTATION_ATOL:
+        raise InvalidObservation(
+            path,
+            f"rotation part has determinant {determinant:.6g}, expected +1 (not a reflection)",
+        )
+    return pose
+
+
+def _decode_depth(
+    depth: DepthImage, expected_shape: tuple[int, int], path: str
+) -> npt.NDArray[np.float32]:
+    """Decode depth to float32 metres with 0 marking invalid pixels."""
+    raw = _decode_base64(depth.data, f"{path}.data")
+    if depth.encoding == "png16":
+        metres = _decode_png16(raw, depth.scale, expected_shape, path)
+    else:
+        metres = _decode_f32(raw, expected_shape, path)
+    # NaN/inf mean "no measurement" on many sensors; the domain marks those pixels with 0.
+    metres[~np.isfinite(metres)] = 0.0
+    if (metres < 0).any():
+        raise InvalidObservation(f"{path}.data", "depth contains negative values")
+    return metres
+
+
+def _decode_base64(data: str, path: str) -> bytes:
+    """Strict base64 decode: any character outside the alphabet is an error, not skipped."""
+    try:
+        return base64.b64decode(data, validate=True)
+    except (binascii.Error, ValueError) as error:
+        raise InvalidObservation(path, f"is not valid base64 ({error})") from error
+
+
+def _decode_png16(
+    raw: bytes, scale: float, expected_shape: tuple[int, int], path: str
+) -> npt.NDArray[np.float32]:
+    """Decode a 16-bit single-channel PNG and scale it to metres."""
+    try:
+        image = Image.open(io.BytesIO(raw), formats=["PNG"])
+    # Pillow reports malformed input through many exception types; all mean "not a PNG".
+    except Exception as error:
+        raise InvalidObservation(f"{path}.data", "is not a PNG image") from error
+    with image:
+        if image.mode not in SIXTEEN_BIT_PNG_MODES:
+            raise InvalidObservation(
+                f"{path}.data",
+                f"PNG must be 16-bit single channel, got Pillow mode {image.mode!r}",
+            )
+        # Compare the header size before decoding pixels, so a huge PNG costs nothing.
+        height_width = (image.height, image.width)
+        if height_width != expected_shape:
+            raise InvalidObservation(
+                f"{path}.data",
+                f"depth size [height, width] = {list(height_width)} does not match "
+                f"the intrinsics {list(expected_shape)}",
+            )
+        try:
+            pixels = np.asarray(image)
+        except Exception as error:
+            raise InvalidObservation(f"{path}.data", f"PNG is corrupt ({error})") from error
+    if pixels.shape != expected_shape:
+        raise InvalidObservation(f"{path}.data", "PNG must have a single channel")
+    # float64 for the product keeps mm -> m exact to float32 rounding.
+    return (pixels.astype(np.float64) * scale).astype(np.float32)
+
+
+def _decode_f32(raw: bytes, expected_shape: tuple[int, int], path: str) -> npt.NDArray[np.float32]:
+    """Read little-endian float32 metres, row-major."""
+    height, width = expected_shape
+    expected_bytes = height * width * 4
+    if len(raw) != expected_bytes:
+        raise InvalidObservation(
+            f"{path}.data",
+            f"f32 depth must be exactly height x width x 4 = {expected_bytes} bytes, "
+            f"got {len(raw)}",
+        )
+    return np.frombuffer(raw, dtype="<f4").reshape(expected_shape).astype(np.float32)
+
+
+def _decode_detection(detection: DetectionIn, depth_shape: tuple[int, ...], path: str) -> Detection:
+    """Decode a detection's mask and embedding."""
+    mask = _decode_mask(detection.mask, depth_shape, f"{path}.mask")
+    embedding = None
+    if detection.embedding is not None:
+        embedding = np.asarray(detection.embedding, dtype=np.float64)
+        if not np.isfinite(embedding).all():
+            raise InvalidObservation(f"{path}.embedding", "contains NaN or infinite values")
+    class_scores = None if detection.class_scores is None else dict(detection.class_scores)
+    return Detection(
+        label=detection.label,
+        score=detection.score,
+        kind=detection.kind,
+        mask=mask,
+        embedding=embedding,
+        class_scores=class_scores,
+    )
+
+
+def _decode_mask(rle: RleMask, depth_shape: tuple[int, ...], path: str) -> npt.NDArray[np.bool_]:
+    """Decode a COCO RLE mask of exactly the depth size to a C-ordered boolean array."""
+    height, width = rle.size
+    if (height, width) != depth_shape:
+        raise InvalidObservation(
+            f"{path}.size",
+            f"mask size {[height, width]} does not match the depth size {list(depth_shape)}",
+        )
+    if isinstance(rle.counts, str):
+        try:
+            runs = compressed_rle_counts(rle.counts)
+        except ValueError as error:
+            raise InvalidObservation(f"{path}.counts", str(error)) from error
+    else:
+        runs = np.asarray(rle.counts, dtype=np.int64)
+        if runs.size and runs.min() < 0:
+            raise InvalidObservation(f"{path}.counts", "run lengths must be non-negative")
+    # A short RLE does not say what the remaining pixels are (pycocotools.mask.decode fills
+    # them with uninitialized memory), so the total must be exact.
+    total = int(runs.sum())
+    if total != height * width:
+        raise InvalidObservation(
+            f"{path}.counts",
+            f"run lengths sum to {total}, expected height x width = {height * width}",
+        )
+    return rle_runs_to_mask(runs, height, width)
+
+
+def rle_runs_to_mask(runs: npt.NDArray[np.int64], height: int, width: int) -> npt.NDArray[np.bool_]:
+    """Expand validated COCO run lengths (zeros first, column-major) to a C-ordered mask."""
+    # Same result as pycocotools.mask.decode, whose Cython wrapper warns under NumPy 2
+    # (an error in our test configuration); expanding the runs in NumPy is as fast.
+    run_values = np.arange(runs.size) % 2 == 1
+    column_major = np.repeat(run_values, runs)
+    return np.ascontiguousarray(column_major.reshape(width, height).T)
+
+
+# Characters of COCO's compressed RLE: 6-bit groups stored as chr(48 + group).
+_RLE_FIRST_CHAR = 48
+_RLE_LAST_CHAR = 48 + 63
+_RLE_MORE = 0x20  # continuation bit of a 6-bit group
+_RLE_SIGN = 0x10  # sign bit of a value's last group
+# Six 5-bit groups hold any signed count of a mask up to 8192 x 8192 pixels.
+_RLE_MAX_GROUPS = 6
+
+
+def compressed_rle_counts(counts: str) -> npt.NDArray[np.int64]:
+    """Run lengths of a compressed COCO RLE string (pycocotools' `rleFrString`, vectorized).
+
+    Raises ValueError with a plain reason when the string is not a valid encoding.
+    """
+    try:
+        codes = np.frombuffer(counts.encode("ascii"), dtype=np.uint8)
+    except UnicodeEncodeError:
+        raise ValueError("compressed RLE must be ASCII") from None
+    if codes.size == 0:
+        raise ValueError("compressed RLE is empty")
+    if codes.min() < _RLE_FIRST_CHAR or codes.max() > _RLE_LAST_CHAR:
+        raise ValueError("compressed RLE contains characters outside '0'..'o'")
+    groups = codes.astype(np.int64) - _RLE_FIRST_CHAR
+    is_last_group = (groups & _RLE_MORE) == 0
+    if not is_last_group[-1]:
+        raise ValueError("compressed RLE ends in the middle of a value")
+    value_ends = np.flatnonzero(is_last_group)
+    value_starts = np.concatenate(([0], value_ends[:-1] + 1))
+    group_counts = value_ends - value_starts + 1
+    if group_counts.max() > _RLE_MAX_GROUPS:
+        raise ValueError("compressed RLE contains a value too large for any mask")
+    group_position = np.arange(groups.size) - np.repeat(value_starts, group_counts)
+    values = np.add.reduceat((groups & 0x1F) << (5 * group_position), value_starts)
+    is_negative = (groups[value_ends] & _RLE_SIGN) != 0
+    values = np.where(is_negative, values - (1 << (5 * group_counts)), values)
+    # From the fourth value on, each is stored as a delta to the value two places back.
+    runs = values.copy()
+    runs[1::2] = np.cumsum(values[1::2])
+    runs[2::2] = np.cumsum(values[2::2])
+    if (runs < 0).any():
+        raise ValueError("compressed RLE decodes to a negative run length")
+    return runs

@@ -1,0 +1,66 @@
+"""Batches: accept observations durably, report their processing."""
+
+from __future__ import annotations
+
+import hashlib
+
+from fastapi import APIRouter, Response
+
+from api_schema import BatchIn, BatchStatus
+from service.codec import canonical_json, decode_batch
+from service.deps import ContainerDep
+from service.errors import NotFound
+from service.store.queue import BatchRecord
+
+router = APIRouter(prefix="/v1/scenes/{scene_id}/batches", tags=["batches"])
+
+
+def batch_out(record: BatchRecord) -> BatchStatus:
+    """Wire form of a queue row."""
+    return BatchStatus(
+        batch_id=record.batch_id,
+        scene_id=record.scene_id,
+        status=record.status,  # type: ignore[arg-type]
+        attempts=record.attempts,
+        frame_count=record.frame_count,
+        content_sha256=record.content_sha256,
+        first_seq=record.first_seq,
+        last_seq=record.last_seq,
+        error=record.error,
+        received_at=record.received_at,
+        finished_at=record.finished_at,
+    )
+
+
+@router.post(
+    "",
+    status_code=202,
+    response_model=BatchStatus,
+    responses={200: {"model": BatchStatus, "description": "The same batch was already accepted."}},
+)
+def post_batch(
+    scene_id: str, batch: BatchIn, response: Response, container: ContainerDep
+) -> BatchStatus:
+    """Validate and durably queue a batch (202); the same batch_id and content again returns the original (200)."""
+    container.log.scene(scene_id)  # 404 before any work
+    decode_batch(batch)  # 422 naming the field; nothing is stored for a bad batch
+    # The blob is the canonical JSON, so its key is the content hash used for idempotency.
+    content = canonical_json(batch.model_dump(mode="json"))
+    content_sha256 = hashlib.sha256(content).hexdigest()
+    blob_key = container.blobs.put(content)
+    record, created = container.queue.submit(
+        scene_id, batch.batch_id, content_sha256, blob_key, len(batch.frames)
+    )
+    if not created:
+        response.status_code = 200
+    return batch_out(record)
+
+
+@router.get("/{batch_id}", response_model=BatchStatus)
+def get_batch(scene_id: str, batch_id: str, container: ContainerDep) -> BatchStatus:
+    """Status of one batch and the seq range it appended."""
+    container.log.scene(scene_id)
+    record = container.queue.get(scene_id, batch_id)
+    if record is None:
+        raise NotFound("batch", batch_id)
+    return batch_out(record)

@@ -1,0 +1,1 @@
+"""The store: event log, projections, snapshots, job queue and blobs."""

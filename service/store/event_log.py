@@ -1,0 +1,279 @@
+"""The per-scene event log: gapless commit-ordered seq, expected-head appends, snapshots, as_of."""
+
+from __future__ import annotations
+
+import time
+import uuid
+import zlib
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import orjson
+import sqlalchemy as sa
+
+from core.events import Event, SceneCreated, event_from_record
+from core.evolve import fold
+from core.params import Params
+from core.state import SNAPSHOT_FORMAT_VERSION, SceneState
+from service.store.engine import read_transaction, write_transaction
+from service.store.errors import ConcurrencyConflict, SceneNotFound, SeqOutOfRange
+from service.store.tables import events, scenes, snapshots
+
+READ_PAGE = 5000
+
+
+@dataclass(frozen=True)
+class SceneRecord:
+    """One row of `scenes`."""
+
+    id: str
+    name: str
+    params: dict[str, Any]
+    head_seq: int
+    created_at: float
+
+
+@dataclass(frozen=True)
+class StoredEvent:
+    """One row of the log."""
+
+    scene_id: str
+    seq: int
+    type: str
+    track_id: str | None
+    state: str | None
+    batch_id: str | None
+    frame_id: str | None
+    recorded_at: float
+    details: dict[str, Any]
+
+    def to_core(self) -> Event:
+        """The typed core event."""
+        return event_from_record(
+            {
+                "type": self.type,
+                "track_id": self.track_id,
+                "state": self.state,
+                "frame_id": self.frame_id,
+                "details": self.details,
+            }
+        )
+
+
+def _scene(row: sa.Row[Any]) -> SceneRecord:
+    return SceneRecord(row.id, row.name, orjson.loads(row.params), row.head_seq, row.created_at)
+
+
+def _stored(scene_id: str, row: sa.Row[Any]) -> StoredEvent:
+    return StoredEvent(
+        scene_id,
+        row.seq,
+        row.type,
+        row.track_id,
+        row.state,
+        row.batch_id,
+        row.frame_id,
+        row.recorded_at,
+        orjson.loads(row.details),
+    )
+
+
+def encode_snapshot(state: SceneState) -> bytes:
+    """Canonical, compressed snapshot body (deterministic bytes for equal states)."""
+    return zlib.compress(orjson.dumps(state.to_dict()), 1)
+
+
+def decode_snapshot(body: bytes) -> SceneState:
+    """Inverse of `encode_snapshot`."""
+    return SceneState.from_dict(orjson.loads(zlib.decompress(body)))
+
+
+class EventLog:
+    """Scenes and their append-only logs on one engine."""
+
+    def __init__(self, engine: sa.Engine, clock: Any = time.time) -> None:
+        self.engine = engine
+        self.clock = clock
+
+    # -- scenes -------------------------------------------------------------------------------
+
+    def create_scene(self, name: str, params: Params, scene_id: str | None = None) -> SceneRecord:
+        """A new scene whose log starts with `scene_created` (seq 0) recording its parameters."""
+        scene_id = scene_id or f"scn-{uuid.uuid4().hex[:12]}"
+        now = self.clock()
+        params_json = orjson.dumps(params.to_dict(), option=orjson.OPT_SORT_KEYS).decode()
+        created = SceneCreated(None, None, None, {"name": name, "params": params.to_dict()})
+        with write_transaction(self.engine) as connection:
+            connection.execute(
+                scenes.insert().values(
+                    id=scene_id, name=name, params=params_json, head_seq=0, created_at=now
+                )
+            )
+            connection.execute(events.insert(), [self._event_row(scene_id, 0, created, None, now)])
+        return SceneRecord(scene_id, name, params.to_dict(), 0, now)
+
+    def scene(self, scene_id: str, connection: sa.Connection | None = None) -> SceneRecord:
+        """The scene row; SceneNotFound when absent."""
+        query = sa.select(scenes).where(scenes.c.id == scene_id)
+        if connection is None:
+            with read_transaction(self.engine) as own:
+                row = own.execute(query).first()
+        else:
+            row = connection.execute(query).first()
+        if row is None:
+            raise SceneNotFound(scene_id)
+        return _scene(row)
+
+    def scenes(self) -> list[SceneRecord]:
+        """Every scene, oldest first."""
+        with read_transaction(self.engine) as connection:
+            rows = connection.execute(
+                sa.select(scenes).order_by(scenes.c.created_at, scenes.c.id)
+            ).all()
+        return [_scene(row) for row in rows]
+
+    # -- the log ------------------------------------------------------------------------------
+
+    def _event_row(
+        self, scene_id: str, seq: int, event: Event, batch_id: str | None, now: float
+    ) -> dict[str, Any]:
+        return {
+            "scene_id": scene_id,
+            "seq": seq,
+            "type": event.type,
+            "track_id": event.track_id,
+            "state": event.state,
+            "batch_id": batch_id,
+            "frame_id": event.frame_id,
+            "recorded_at": now,
+            "details": orjson.dumps(dict(event.details)).decode(),
+        }
+
+    def append(
+        self,
+        connection: sa.Connection,
+        scene_id: str,
+        expected_head: int,
+        new_events: Sequence[Event],
+        batch_id: str | None = None,
+    ) -> tuple[int, int] | None:
+        """Append inside the caller's write transaction; (first_seq, last_seq), None if no events.
+
+        The conditional head update serializes writers of one scene until commit; a rollback
+        leaves no gap; zero rows updated means somebody else appended first.
+        """
+        if not new_events:
+            return None
+        count = len(new_events)
+        result = connection.execute(
+            sa.update(scenes)
+            .where(scenes.c.id == scene_id, scenes.c.head_seq == expected_head)
+            .values(head_seq=scenes.c.head_seq + count)
+        )
+        if result.rowcount != 1:
+            raise ConcurrencyConflict(f"scene {scene_id!r}: head is not {expected_head}")
+        now = self.clock()
+        rows = [
+            self._event_row(scene_id, expected_head + 1 + i, event, batch_id, now)
+            for i, event in enumerate(new_events)
+        ]
+        connection.execute(events.insert(), rows)
+        return expected_head + 1, expected_head + count
+
+    def read(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        up_to: int | None = None,
+        limit: int | None = None,
+        track_id: str | None = None,
+        event_type: str | None = None,
+        connection: sa.Connection | None = None,
+    ) -> list[StoredEvent]:
+        """Events with after < seq (<= up_to), in seq order, optionally filtered."""
+        query = sa.select(events).where(events.c.scene_id == scene_id, events.c.seq > after)
+        if up_to is not None:
+            query = query.where(events.c.seq <= up_to)
+        if track_id is not None:
+            query = query.where(events.c.track_id == track_id)
+        if event_type is not None:
+            query = query.where(events.c.type == event_type)
+        query = query.order_by(events.c.seq)
+        if limit is not None:
+            query = query.limit(limit)
+        if connection is None:
+            with read_transaction(self.engine) as own:
+                rows = own.execute(query).all()
+        else:
+            rows = connection.execute(query).all()
+        return [_stored(scene_id, row) for row in rows]
+
+    def iter_events(
+        self, scene_id: str, *, after: int = -1, up_to: int | None = None
+    ) -> Iterator[StoredEvent]:
+        """All events in pages, for replays of long logs."""
+        cursor = after
+        while True:
+            page = self.read(scene_id, after=cursor, up_to=up_to, limit=READ_PAGE)
+            yield from page
+            if len(page) < READ_PAGE:
+                return
+            cursor = page[-1].seq
+
+    # -- state --------------------------------------------------------------------------------
+
+    def load_state(self, scene_id: str, as_of: int | None = None) -> SceneState:
+        """State at `as_of` (default the head): the newest snapshot at or before it plus the tail."""
+        with read_transaction(self.engine) as connection:
+            head = self.scene(scene_id, connection).head_seq
+            target = head if as_of is None else as_of
+            if target > head or target < 0:
+                raise SeqOutOfRange(f"as_of {target} is outside 0..{head}")
+            base = self._snapshot_at_or_before(connection, scene_id, target) or SceneState()
+            tail = self.read(scene_id, after=base.head_seq, up_to=target, connection=connection)
+        return fold(base, (event.to_core() for event in tail))
+
+    def replay(self, scene_id: str, up_to: int | None = None) -> SceneState:
+        """Full replay from seq 0, ignoring snapshots."""
+        return fold(SceneState(), (e.to_core() for e in self.iter_events(scene_id, up_to=up_to)))
+
+    def _snapshot_at_or_before(
+        self, connection: sa.Connection, scene_id: str, seq: int
+    ) -> SceneState | None:
+        row = connection.execute(
+            sa.select(snapshots.c.format_version, snapshots.c.body)
+            .where(snapshots.c.scene_id == scene_id, snapshots.c.seq <= seq)
+            .order_by(snapshots.c.seq.desc())
+            .limit(1)
+        ).first()
+        if row is None or row.format_version != SNAPSHOT_FORMAT_VERSION:
+            return None  # a cache in another format is ignored: replay from the start
+        return decode_snapshot(row.body)
+
+    def save_snapshot(self, connection: sa.Connection, scene_id: str, state: SceneState) -> None:
+        """Store a snapshot of `state` at its head (inside the caller's transaction)."""
+        connection.execute(
+            snapshots.insert().values(
+                scene_id=scene_id,
+                seq=state.head_seq,
+                format_version=SNAPSHOT_FORMAT_VERSION,
+                body=encode_snapshot(state),
+            )
+        )
+
+    def snapshot_seqs(self, scene_id: str) -> list[int]:
+        """Where snapshots exist."""
+        with read_transaction(self.engine) as connection:
+            rows = connection.execute(
+                sa.select(snapshots.c.seq)
+                .where(snapshots.c.scene_id == scene_id)
+                .order_by(snapshots.c.seq)
+            ).all()
+        return [row.seq for row in rows]
+
+
+def snapshot_due(previous_head: int, new_head: int, interval: int) -> bool:
+    """True when an append crossed a multiple of the snapshot interval."""
+    return interval > 0 and new_head // interval > previous_head // interval

@@ -1,0 +1,150 @@
+"""The current track table as a SQL projection of the log, and its rebuild."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import orjson
+import sqlalchemy as sa
+
+from core.events import Event
+from core.evolve import fold
+from core.state import SNAPSHOT_FORMAT_VERSION, SceneState, Track
+from service.store.engine import read_transaction, write_transaction
+from service.store.event_log import EventLog, encode_snapshot
+from service.store.tables import snapshots, tracks
+
+
+def track_row(scene_id: str, track: Track, seq: int) -> dict[str, Any]:
+    """The projection row of one track."""
+    return {
+        "scene_id": scene_id,
+        "track_id": track.track_id,
+        "kind": track.kind,
+        "label": track.label,
+        "state": track.lifecycle,
+        "p_exist": track.p_exist,
+        "center_x": track.center[0],
+        "center_y": track.center[1],
+        "center_z": track.center[2],
+        "parent": track.parent,
+        "last_observed": track.last_observed,
+        "belief": orjson.dumps(track.to_dict()).decode(),
+        "updated_seq": seq,
+    }
+
+
+def last_seq_by_track(first_seq: int, new_events: Iterable[Event]) -> dict[str, int]:
+    """For each track touched by events numbered from `first_seq`, the seq of its last event."""
+    touched: dict[str, int] = {}
+    for offset, event in enumerate(new_events):
+        if event.track_id is not None:
+            touched[event.track_id] = first_seq + offset
+    return touched
+
+
+def write_tracks(
+    connection: sa.Connection, scene_id: str, state: SceneState, touched: Mapping[str, int]
+) -> None:
+    """Upsert the rows of the touched tracks (inside the caller's transaction)."""
+    if not touched:
+        return
+    ids = sorted(touched)
+    connection.execute(
+        sa.delete(tracks).where(tracks.c.scene_id == scene_id, tracks.c.track_id.in_(ids))
+    )
+    connection.execute(
+        tracks.insert(), [track_row(scene_id, state.tracks[i], touched[i]) for i in ids]
+    )
+
+
+def query_tracks(
+    engine: sa.Engine,
+    scene_id: str,
+    *,
+    label: str | None = None,
+    state: str | None = None,
+    parent: str | None = None,
+) -> list[dict[str, Any]]:
+    """Projection rows of a scene, filtered by label, lifecycle state or parent."""
+    query = sa.select(tracks).where(tracks.c.scene_id == scene_id)
+    if label is not None:
+        query = query.where(tracks.c.label == label)
+    if state is not None:
+        query = query.where(tracks.c.state == state)
+    if parent is not None:
+        query = query.where(tracks.c.parent == parent)
+    with read_transaction(engine) as connection:
+        rows = connection.execute(query.order_by(tracks.c.track_id)).all()
+    return [dict(row._mapping) for row in rows]
+
+
+@dataclass
+class SceneRebuild:
+    """What `rebuild` found for one scene."""
+
+    scene_id: str
+    events: int
+    tracks_differ: list[str] = field(default_factory=list)
+    snapshots_differ: list[int] = field(default_factory=list)
+
+    @property
+    def identical(self) -> bool:
+        """True when the rebuilt projections equal the old ones bit for bit."""
+        return not self.tracks_differ and not self.snapshots_differ
+
+
+def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
+    """Drop the scene's projections and rebuild them from its log; report any difference."""
+    with read_transaction(log.engine) as connection:
+        old_tracks = {
+            row.track_id: dict(row._mapping)
+            for row in connection.execute(sa.select(tracks).where(tracks.c.scene_id == scene_id))
+        }
+        old_snapshots = {
+            row.seq: row.body
+            for row in connection.execute(
+                sa.select(snapshots.c.seq, snapshots.c.body).where(snapshots.c.scene_id == scene_id)
+            )
+        }
+    # Replay from seq 0, snapshotting at the same positions as before.
+    state, count = SceneState(), 0
+    new_snapshots: dict[int, bytes] = {}
+    touched: dict[str, int] = {}
+    pending = sorted(old_snapshots)
+    batch: list[Event] = []
+    for stored in log.iter_events(scene_id):
+        batch.append(stored.to_core())
+        count += 1
+        if stored.track_id is not None:
+            touched[stored.track_id] = stored.seq
+        if pending and stored.seq == pending[0]:
+            state = fold(state, batch)
+            batch = []
+            new_snapshots[pending.pop(0)] = encode_snapshot(state)
+    state = fold(state, batch)
+    with write_transaction(log.engine) as connection:
+        connection.execute(sa.delete(tracks).where(tracks.c.scene_id == scene_id))
+        connection.execute(sa.delete(snapshots).where(snapshots.c.scene_id == scene_id))
+        write_tracks(connection, scene_id, state, touched)
+        for seq, body in sorted(new_snapshots.items()):
+            connection.execute(
+                snapshots.insert().values(
+                    scene_id=scene_id, seq=seq, format_version=SNAPSHOT_FORMAT_VERSION, body=body
+                )
+            )
+    report = SceneRebuild(scene_id, count)
+    for track_id in sorted(set(old_tracks) | set(state.tracks)):
+        new = (
+            track_row(scene_id, state.tracks[track_id], touched[track_id])
+            if track_id in state.tracks
+            else None
+        )
+        if new != old_tracks.get(track_id):
+            report.tracks_differ.append(track_id)
+    report.snapshots_differ = [
+        seq for seq in sorted(old_snapshots) if new_snapshots.get(seq) != old_snapshots[seq]
+    ]
+    return report

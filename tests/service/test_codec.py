@@ -1,0 +1,535 @@
+"""Wire -> domain decoding of batches: arrays, field paths of bad input, content hashing."""
+
+from __future__ import annotations
+
+import base64
+import copy
+import hashlib
+import io
+import json
+import time
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from PIL import Image
+from pycocotools import mask as coco_mask
+from pydantic import ValidationError
+
+from api_schema import BatchIn
+from service.codec import InvalidObservation, compressed_rle_counts, content_sha256, decode_batch
+
+HEIGHT, WIDTH = 48, 64
+
+
+def png_base64(pixels: npt.NDArray[Any], image_format: str = "PNG") -> str:
+    """Encode an array with Pillow (uint16 -> 16-bit grayscale) and base64 it."""
+    buffer = io.BytesIO()
+    Image.fromarray(pixels).save(buffer, format=image_format)
+    return base64.b64encode(buffer.getvalue()).decode("ascii")
+
+
+def f32_base64(metres: npt.NDArray[np.float32]) -> str:
+    """Little-endian float32, row-major, base64."""
+    return base64.b64encode(metres.astype("<f4").tobytes()).decode("ascii")
+
+
+def rle_of(mask: npt.NDArray[np.bool_]) -> dict[str, Any]:
+    """COCO compressed RLE of a boolean mask, as a client would post it."""
+    encoded = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))
+    return {"size": [int(s) for s in encoded["size"]], "counts": encoded["counts"].decode("ascii")}
+
+
+def uncompressed_rle_of(mask: npt.NDArray[np.bool_]) -> dict[str, Any]:
+    """COCO uncompressed RLE (list of ints, column-major, starting with a run of zeros)."""
+    column_major = mask.T.ravel().astype(np.int8)
+    change_points = np.flatnonzero(np.diff(column_major)) + 1
+    boundaries = np.concatenate(([0], change_points, [column_major.size]))
+    runs = np.diff(boundaries).tolist()
+    if column_major[0]:
+        runs = [0, *runs]
+    return {"size": list(mask.shape), "counts": runs}
+
+
+def sample_depth_mm() -> npt.NDArray[np.uint16]:
+    """A depth ramp in millimetres with a block of invalid (0) pixels."""
+    depth = (500 + np.arange(HEIGHT * WIDTH) % 4000).astype(np.uint16).reshape(HEIGHT, WIDTH)
+    depth[:5, :7] = 0
+    return depth
+
+
+def sample_masks() -> list[npt.NDArray[np.bool_]]:
+    """Two masks: a box, and a diagonal band touching the first pixel."""
+    box = np.zeros((HEIGHT, WIDTH), dtype=bool)
+    box[10:30, 20:50] = True
+    rows, cols = np.indices((HEIGHT, WIDTH))
+    band = np.abs(rows - cols) < 3
+    return [box, band]
+
+
+def sample_pose() -> list[list[float]]:
+    """A rigid pose: 30 degrees about z plus a translation."""
+    angle = np.deg2rad(30.0)
+    pose = np.eye(4)
+    pose[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
+    pose[:3, 3] = [1.5, -0.25, 0.8]
+    return pose.tolist()
+
+
+def frame_body(frame_id: str = "f0") -> dict[str, Any]:
+    """One valid wire frame with a png16 depth and two detections."""
+    box, band = sample_masks()
+    return {
+        "frame_id": frame_id,
+        "timestamp": 12.5,
+        "intrinsics": {
+            "width": WIDTH,
+            "height": HEIGHT,
+            "fx": 50.0,
+            "fy": 51.0,
+            "cx": 31.5,
+            "cy": 23.5,
+        },
+        "pose": sample_pose(),
+        "depth": {"encoding": "png16", "scale": 0.001, "data": png_base64(sample_depth_mm())},
+        "detections": [
+            {
+                "label": "mug",
+                "score": 0.93,
+                "kind": "object",
+                "mask": rle_of(box),
+                "embedding": [0.1, 0.2, -0.3],
+                "class_scores": {"mug": 0.93, "cup": 0.05},
+            },
+            {"label": "table", "score": 0.6, "kind": "fixture", "mask": uncompressed_rle_of(band)},
+        ],
+    }
+
+
+def batch_body(*frames: dict[str, Any]) -> dict[str, Any]:
+    """A valid wire batch (one frame unless frames are given)."""
+    return {"batch_id": "robot-1:batch.0001", "frames": list(frames) or [frame_body()]}
+
+
+def decode_error(body: dict[str, Any]) -> InvalidObservation:
+    """Decode a body that must fail in the codec (after passing the schema)."""
+    batch = BatchIn.model_validate(body)
+    with pytest.raises(InvalidObservation) as caught:
+        decode_batch(batch)
+    return caught.value
+
+
+def schema_errors(body: dict[str, Any]) -> list[tuple[tuple[str | int, ...], str]]:
+    """(location, type) of each pydantic error of a body that must fail the schema."""
+    with pytest.raises(ValidationError) as caught:
+        BatchIn.model_validate(body)
+    return [(tuple(error["loc"]), error["type"]) for error in caught.value.errors()]
+
+
+# --- valid input --------------------------------------------------------------------------
+
+
+def test_valid_batch_decodes_to_metres_masks_and_float64_pose() -> None:
+    batch = decode_batch(BatchIn.model_validate(batch_body(frame_body("a"), frame_body("b"))))
+
+    assert batch.batch_id == "robot-1:batch.0001"
+    assert [frame.frame_id for frame in batch.frames] == ["a", "b"]
+    frame = batch.frames[0]
+    assert frame.timestamp == 12.5
+    assert (frame.intrinsics.width, frame.intrinsics.height) == (WIDTH, HEIGHT)
+    assert frame.intrinsics.fy == 51.0
+
+    assert frame.depth.dtype == np.float32
+    assert frame.depth.shape == (HEIGHT, WIDTH)
+    expected_metres = sample_depth_mm().astype(np.float64) / 1000.0
+    np.testing.assert_allclose(frame.depth, expected_metres, rtol=1e-6, atol=0)
+    assert (frame.depth[:5, :7] == 0).all()
+
+    assert frame.pose.dtype == np.float64
+    np.testing.assert_array_equal(frame.pose, np.array(sample_pose()))
+
+    box, band = sample_masks()
+    mug, table = frame.detections
+    assert mug.mask.dtype == np.bool_ and mug.mask.flags.c_contiguous
+    np.testing.assert_array_equal(mug.mask, box)
+    np.testing.assert_array_equal(table.mask, band)
+    assert (mug.label, mug.score, mug.kind) == ("mug", 0.93, "object")
+    assert (table.label, table.kind) == ("table", "fixture")
+    assert mug.embedding is not None and mug.embedding.dtype == np.float64
+    np.testing.assert_array_equal(mug.embedding, [0.1, 0.2, -0.3])
+    assert mug.class_scores == {"mug": 0.93, "cup": 0.05}
+    assert table.embedding is None and table.class_scores is None
+
+
+def test_png16_scale_is_applied() -> None:
+    frame = frame_body()
+    frame["depth"]["scale"] = 0.0002  # e.g. a 1/5 mm sensor
+    decoded = decode_batch(BatchIn.model_validate(batch_body(frame))).frames[0]
+    np.testing.assert_allclose(decoded.depth, sample_depth_mm() * 0.0002, rtol=1e-6)
+
+
+def test_f32_depth_keeps_metres_and_zeroes_nan_and_inf() -> None:
+    metres = np.linspace(0.3, 4.0, HEIGHT * WIDTH, dtype=np.float32).reshape(HEIGHT, WIDTH)
+    metres[0, 0] = np.nan
+    metres[0, 1] = np.inf
+    metres[0, 2] = -np.inf
+    frame = frame_body()
+    frame["depth"] = {"encoding": "f32", "data": f32_base64(metres)}
+
+    depth = decode_batch(BatchIn.model_validate(batch_body(frame))).frames[0].depth
+
+    assert depth.dtype == np.float32 and depth.flags.writeable
+    assert (depth[0, :3] == 0).all()
+    np.testing.assert_array_equal(depth[1:], metres[1:])
+
+
+def test_frame_without_detections_is_valid() -> None:
+    frame = frame_body()
+    del frame["detections"]
+    assert decode_batch(BatchIn.model_validate(batch_body(frame))).frames[0].detections == ()
+
+
+def test_mask_of_all_ones_starts_with_an_empty_run() -> None:
+    full = np.ones((HEIGHT, WIDTH), dtype=bool)
+    frame = frame_body()
+    frame["detections"][0]["mask"] = rle_of(full)
+    frame["detections"][1]["mask"] = {"size": [HEIGHT, WIDTH], "counts": [0, HEIGHT * WIDTH]}
+    detections = decode_batch(BatchIn.model_validate(batch_body(frame))).frames[0].detections
+    assert detections[0].mask.all() and detections[1].mask.all()
+
+
+# --- bad depth ----------------------------------------------------------------------------
+
+
+def with_depth(**depth: Any) -> dict[str, Any]:
+    """A one-frame batch whose depth object is replaced."""
+    frame = frame_body()
+    frame["depth"] = depth
+    return batch_body(frame)
+
+
+@pytest.mark.parametrize(
+    ("depth", "reason_part"),
+    [
+        pytest.param({"encoding": "png16", "data": "not base64!"}, "base64", id="bad-base64"),
+        pytest.param({"encoding": "png16", "data": "QUJ"}, "base64", id="bad-padding"),
+        pytest.param(
+            {"encoding": "png16", "data": base64.b64encode(b"hello, not a png").decode()},
+            "not a PNG",
+            id="not-an-image",
+        ),
+        pytest.param(
+            {"encoding": "png16", "data": png_base64(sample_depth_mm(), "TIFF")},
+            "not a PNG",
+            id="16-bit-tiff",
+        ),
+        pytest.param(
+            {"encoding": "png16", "data": png_base64(np.zeros((HEIGHT, WIDTH), np.uint8))},
+            "16-bit",
+            id="8-bit-png",
+        ),
+        pytest.param(
+            {"encoding": "png16", "data": png_base64(np.zeros((HEIGHT, WIDTH, 3), np.uint8))},
+            "16-bit",
+            id="rgb-png",
+        ),
+        pytest.param(
+            {"encoding": "png16", "data": png_base64(np.zeros((HEIGHT, WIDTH + 1), np.uint16))},
+            "does not match the intrinsics",
+            id="png-wrong-size",
+        ),
+        pytest.param(
+            {"encoding": "f32", "data": f32_base64(np.ones((HEIGHT, WIDTH - 1), np.float32))},
+            f"{HEIGHT * WIDTH * 4} bytes",
+            id="f32-short",
+        ),
+        pytest.param(
+            {
+                "encoding": "f32",
+                "data": base64.b64encode(np.ones(HEIGHT * WIDTH, "<f4").tobytes() + b"x").decode(),
+            },
+            f"got {HEIGHT * WIDTH * 4 + 1}",
+            id="f32-long",
+        ),
+        pytest.param(
+            {"encoding": "f32", "data": f32_base64(np.full((HEIGHT, WIDTH), -1.0, np.float32))},
+            "negative",
+            id="f32-negative",
+        ),
+    ],
+)
+def test_undecodable_depth_names_the_data_field(depth: dict[str, Any], reason_part: str) -> None:
+    error = decode_error(with_depth(**depth))
+    assert error.field == "frames[0].depth.data"
+    assert reason_part in error.reason
+
+
+def test_truncated_png_is_rejected() -> None:
+    raw = base64.b64decode(png_base64(sample_depth_mm()))
+    error = decode_error(
+        with_depth(encoding="png16", data=base64.b64encode(raw[: len(raw) // 2]).decode())
+    )
+    assert error.field == "frames[0].depth.data"
+    assert "PNG" in error.reason
+
+
+def test_unknown_depth_encoding_and_bad_scale_fail_the_schema() -> None:
+    data = png_base64(sample_depth_mm())
+    assert schema_errors(with_depth(encoding="jpeg", data=data)) == [
+        (("frames", 0, "depth", "encoding"), "literal_error")
+    ]
+    assert schema_errors(with_depth(encoding="png16", scale=0, data=data)) == [
+        (("frames", 0, "depth", "scale"), "greater_than")
+    ]
+
+
+# --- bad masks ----------------------------------------------------------------------------
+
+
+def with_mask(mask: dict[str, Any], detection_index: int = 1) -> dict[str, Any]:
+    """A one-frame batch whose given detection has this mask."""
+    frame = frame_body()
+    frame["detections"][detection_index]["mask"] = mask
+    return batch_body(frame)
+
+
+def test_mask_size_different_from_depth_size_names_mask_size() -> None:
+    small = np.zeros((HEIGHT, WIDTH - 4), dtype=bool)
+    error = decode_error(with_mask(rle_of(small)))
+    assert error.field == "frames[0].detections[1].mask.size"
+    assert f"[{HEIGHT}, {WIDTH - 4}]" in error.reason
+    assert f"[{HEIGHT}, {WIDTH}]" in error.reason
+
+
+@pytest.mark.parametrize(
+    ("counts", "reason_part"),
+    [
+        pytest.param("", "empty", id="empty-string"),
+        pytest.param("abc~", "outside", id="bad-characters"),
+        pytest.param("é1", "ASCII", id="non-ascii"),
+        pytest.param("2P", "middle of a value", id="truncated-value"),
+        pytest.param("ooooooo1", "too large", id="overlong-value"),
+        pytest.param(rle_of(np.ones((4, 4), bool))["counts"], "sum to", id="short-string"),
+        pytest.param("0@", "negative", id="negative-run"),
+        pytest.param([10, 20], "sum to", id="short-list"),
+        pytest.param([HEIGHT * WIDTH, 1], "sum to", id="long-list"),
+    ],
+)
+def test_undecodable_mask_names_mask_counts(counts: Any, reason_part: str) -> None:
+    error = decode_error(with_mask({"size": [HEIGHT, WIDTH], "counts": counts}))
+    assert error.field == "frames[0].detections[1].mask.counts"
+    assert reason_part in error.reason
+
+
+@pytest.mark.parametrize("counts", [[1, -2], [1, True], 5, {"a": 1}, [1.5]])
+def test_mask_counts_of_the_wrong_type_fail_the_schema(counts: Any) -> None:
+    assert schema_errors(with_mask({"size": [HEIGHT, WIDTH], "counts": counts})) == [
+        (("frames", 0, "detections", 1, "mask", "counts"), "rle_counts")
+    ]
+
+
+@settings(max_examples=150, deadline=None)
+@given(arrays(np.bool_, st.tuples(st.integers(1, 40), st.integers(1, 40))))
+def test_compressed_rle_counts_match_pycocotools(mask: npt.NDArray[np.bool_]) -> None:
+    runs = compressed_rle_counts(rle_of(mask)["counts"])
+    assert int(runs.sum()) == mask.size
+    column_major = np.repeat(np.arange(runs.size) % 2, runs).astype(bool)
+    np.testing.assert_array_equal(column_major.reshape(mask.shape[::-1]).T, mask)
+
+
+# --- bad poses ----------------------------------------------------------------------------
+
+
+def with_pose(pose: list[list[float]]) -> dict[str, Any]:
+    """A one-frame batch with this pose."""
+    frame = frame_body()
+    frame["pose"] = pose
+    return batch_body(frame)
+
+
+def scaled_rotation() -> list[list[float]]:
+    pose = np.array(sample_pose())
+    pose[:3, :3] *= 1.01
+    return pose.tolist()
+
+
+def reflection() -> list[list[float]]:
+    pose = np.array(sample_pose())
+    pose[:3, 2] *= -1
+    return pose.tolist()
+
+
+def projective_last_row() -> list[list[float]]:
+    pose = np.array(sample_pose())
+    pose[3] = [0.0, 0.0, 0.01, 1.0]
+    return pose.tolist()
+
+
+@pytest.mark.parametrize(
+    ("pose", "reason_part"),
+    [
+        pytest.param(scaled_rotation(), "not orthonormal", id="scaled"),
+        pytest.param(reflection(), "determinant -1", id="reflection"),
+        pytest.param(projective_last_row(), "last row", id="last-row"),
+    ],
+)
+def test_non_rigid_pose_names_the_pose(pose: list[list[float]], reason_part: str) -> None:
+    error = decode_error(with_pose(pose))
+    assert error.field == "frames[0].pose"
+    assert reason_part in error.reason
+
+
+def test_pose_within_tolerance_is_accepted() -> None:
+    pose = np.array(sample_pose())
+    pose[:3, :3] += 1e-6  # float32 round-off on the client
+    pose[3, 0] = 1e-8
+    decoded = decode_batch(BatchIn.model_validate(with_pose(pose.tolist())))
+    np.testing.assert_array_equal(decoded.frames[0].pose, pose)
+
+
+def test_non_finite_pose_fails_the_schema_and_the_codec() -> None:
+    pose = sample_pose()
+    pose[1][2] = float("nan")
+    assert schema_errors(with_pose(pose)) == [(("frames", 0, "pose", 1, 2), "finite_number")]
+
+    # The codec does not trust that its input went through validation.
+    batch = BatchIn.model_validate(with_pose(sample_pose()))
+    batch.frames[0].pose[0][3] = float("inf")
+    with pytest.raises(InvalidObservation) as caught:
+        decode_batch(batch)
+    assert caught.value.field == "frames[0].pose"
+    assert "infinite" in caught.value.reason
+
+
+def test_pose_of_wrong_shape_fails_the_schema() -> None:
+    assert schema_errors(with_pose(sample_pose()[:3])) == [(("frames", 0, "pose"), "too_short")]
+    bad_row = sample_pose()
+    bad_row[2] = bad_row[2][:3]
+    assert schema_errors(with_pose(bad_row)) == [(("frames", 0, "pose", 2), "too_short")]
+
+
+# --- other schema checks ------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("focal", [0.0, -525.0])
+@pytest.mark.parametrize("axis", ["fx", "fy"])
+def test_non_positive_focal_length_fails_the_schema(axis: str, focal: float) -> None:
+    frame = frame_body()
+    frame["intrinsics"][axis] = focal
+    assert schema_errors(batch_body(frame)) == [(("frames", 0, "intrinsics", axis), "greater_than")]
+
+
+def test_empty_frame_list_fails_the_schema() -> None:
+    assert schema_errors({"batch_id": "b1", "frames": []}) == [(("frames",), "too_short")]
+
+
+def test_duplicate_frame_ids_fail_the_schema() -> None:
+    body = batch_body(frame_body("a"), frame_body("b"), frame_body("a"))
+    with pytest.raises(ValidationError) as caught:
+        BatchIn.model_validate(body)
+    [error] = caught.value.errors()
+    assert error["loc"] == ("frames",)
+    assert error["type"] == "duplicate_frame_id"
+    assert "'a'" in error["msg"] and "frames[0]" in error["msg"] and "frames[2]" in error["msg"]
+
+
+@pytest.mark.parametrize("batch_id", ["", "has space", "slash/no", "x" * 201])
+def test_bad_batch_id_fails_the_schema(batch_id: str) -> None:
+    body = batch_body()
+    body["batch_id"] = batch_id
+    assert [location for location, _ in schema_errors(body)] == [("batch_id",)]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "error_type"),
+    [
+        ("width", "64", "int_type"),  # numbers are not coerced from strings
+        ("width", True, "int_type"),
+        ("height", 0, "greater_than"),
+        ("cx", float("inf"), "finite_number"),
+    ],
+)
+def test_intrinsics_are_strict_numbers(field: str, value: Any, error_type: str) -> None:
+    frame = frame_body()
+    frame["intrinsics"][field] = value
+    assert schema_errors(batch_body(frame)) == [(("frames", 0, "intrinsics", field), error_type)]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "location_tail"),
+    [
+        ("score", 1.5, ("score",)),
+        ("kind", "person", ("kind",)),
+        ("embedding", [], ("embedding",)),
+        ("embedding", [0.1, float("nan")], ("embedding", 1)),
+        ("class_scores", {"": 0.5}, ("class_scores", "", "[key]")),
+        ("class_scores", {"cup": float("inf")}, ("class_scores", "cup")),
+        ("unexpected", 1, ("unexpected",)),
+    ],
+)
+def test_bad_detection_fields_fail_the_schema(
+    field: str, value: Any, location_tail: tuple[str | int, ...]
+) -> None:
+    frame = frame_body()
+    frame["detections"][0][field] = value
+    [(location, _)] = schema_errors(batch_body(frame))
+    assert location == ("frames", 0, "detections", 0, *location_tail)
+
+
+def test_kind_defaults_to_object() -> None:
+    frame = frame_body()
+    del frame["detections"][0]["kind"]
+    detection = decode_batch(BatchIn.model_validate(batch_body(frame))).frames[0].detections[0]
+    assert detection.kind == "object"
+
+
+# --- hashing and speed --------------------------------------------------------------------
+
+
+def test_content_sha256_ignores_key_order_and_whitespace() -> None:
+    body = batch_body()
+    compact = json.dumps(body, separators=(",", ":"))
+    pretty_reordered = json.dumps(dict(reversed(list(body.items()))), indent=4)
+    assert content_sha256(json.loads(compact)) == content_sha256(json.loads(pretty_reordered))
+
+    nested = {"b": 1, "a": {"y": [1, 2], "x": "z"}}
+    expected = hashlib.sha256(b'{"a":{"x":"z","y":[1,2]},"b":1}').hexdigest()
+    assert content_sha256(nested) == expected
+
+
+def test_content_sha256_changes_with_content() -> None:
+    body = batch_body()
+    changed = copy.deepcopy(body)
+    changed["frames"][0]["timestamp"] = 12.75
+    assert content_sha256(body) != content_sha256(changed)
+
+
+def test_two_vga_frames_with_twenty_masks_decode_quickly() -> None:
+    height, width = 480, 640
+    rng = np.random.default_rng(7)
+    depth_mm = rng.integers(300, 5000, size=(height, width), dtype=np.uint16)
+    rows, cols = np.indices((height, width))
+    detections = []
+    for index in range(20):
+        cy, cx, radius = 40 + 20 * index, 30 + 29 * index, 25 + 3 * index
+        blob = (rows - cy) ** 2 + (cols - cx) ** 2 < radius**2
+        detections.append({"label": f"thing{index}", "score": 0.5, "mask": rle_of(blob)})
+    frame = frame_body()
+    frame["intrinsics"].update(width=width, height=height)
+    frame["depth"]["data"] = png_base64(depth_mm)
+    frame["detections"] = detections
+    batch = BatchIn.model_validate(batch_body(frame, {**frame, "frame_id": "f1"}))
+
+    durations = []
+    for _ in range(3):
+        start = time.perf_counter()
+        decoded = decode_batch(batch)
+        durations.append(time.perf_counter() - start)
+
+    assert len(decoded.frames[1].detections) == 20
+    # Generous bound (target is well under 0.1 s): catches an accidental per-pixel Python loop.
+    assert min(durations) < 0.25
