@@ -6,7 +6,6 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
-from fastapi.responses import ORJSONResponse
 
 from api_schema import Health
 from service.bootstrap import Container, build_container
@@ -41,7 +40,6 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
             "3D scene graph kept as an append-only log of typed events, with time travel (`as_of`) "
             "and explanations of every removal."
         ),
-        default_response_class=ORJSONResponse,
         lifespan=lifespan,
     )
     app.state.container = container

@@ -38,7 +38,10 @@ def live_run(steps):
             if s[name] is not None
         }
         occluders = [((0.0, 0.0, 1.0), 0.6)] if s["occlude"] else []
-        events = decide(state, scene_batch(f"b{i}", objects, detect=s["detect"] & set(objects), occluders=occluders))
+        events = decide(
+            state,
+            scene_batch(f"b{i}", objects, detect=s["detect"] & set(objects), occluders=occluders),
+        )
         state = fold(state, events)
         log.extend(events)
     return log, state

@@ -1,0 +1,1 @@
+"""Benchmarks and the simulated robot that drives the service over HTTP."""

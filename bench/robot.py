@@ -1,0 +1,174 @@
+"""A simulated robot: walks the demo scenario and posts observation batches to the HTTP API."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
+
+import httpx
+import numpy as np
+from tqdm import tqdm
+
+from bench.sim.camera import CameraModel
+from bench.sim.demo import demo_script, demo_trajectory, demo_world, world_at
+from bench.sim.detector import detect
+from bench.sim.render import add_kinect_noise, render
+from bench.sim.wire import make_batch, make_frame
+
+FRAME_PERIOD_SECONDS = 0.1  # simulated sensor clock: 10 Hz
+CONNECT_ATTEMPTS = 6  # with doubling from 0.2 s: about 6 s for the service to come up
+FIRST_BACKOFF_SECONDS = 0.2
+DETECTOR_SETTINGS: dict[str, Any] = {
+    "recall": 0.95,
+    "embedding_noise": 0.05,
+    "boundary_leak_px": 1,
+}
+
+
+def _with_retries(
+    send: Callable[[], httpx.Response],
+    retry_on: tuple[type[Exception], ...],
+) -> httpx.Response:
+    """Call `send`, retrying with doubling backoff while the service is unreachable."""
+    backoff = FIRST_BACKOFF_SECONDS
+    for attempt in range(CONNECT_ATTEMPTS):
+        try:
+            return send()
+        except retry_on:
+            if attempt == CONNECT_ATTEMPTS - 1:
+                raise
+            time.sleep(backoff)
+            backoff *= 2
+    raise AssertionError("unreachable")  # the loop either returns or re-raises
+
+
+def _expect(response: httpx.Response, status: int, what: str) -> httpx.Response:
+    """The response if it has the expected status, else a RuntimeError naming the request."""
+    if response.status_code != status:
+        raise RuntimeError(
+            f"{what}: expected HTTP {status}, got {response.status_code}: {response.text[:500]}"
+        )
+    return response
+
+
+def create_scene(client: httpx.Client, base_url: str, scene_name: str) -> str:
+    """POST /v1/scenes and return the new scene's id."""
+    # Only connection failures are retried: the request never reached the service, so a
+    # retry cannot create a second scene.
+    response = _with_retries(
+        lambda: client.post(f"{base_url}/v1/scenes", json={"name": scene_name}),
+        retry_on=(httpx.ConnectError, httpx.ConnectTimeout),
+    )
+    return str(_expect(response, 201, "create scene").json()["id"])
+
+
+def post_batch(client: httpx.Client, base_url: str, scene_id: str, batch: dict[str, Any]) -> None:
+    """POST one batch; any transport error is retried since batch_id makes the call idempotent."""
+    response = _with_retries(
+        lambda: client.post(f"{base_url}/v1/scenes/{scene_id}/batches", json=batch),
+        retry_on=(httpx.TransportError,),
+    )
+    _expect(response, 202, f"post batch {batch['batch_id']}")
+
+
+def _chunks(items: Iterable[dict[str, Any]], size: int) -> Iterator[list[dict[str, Any]]]:
+    """Consecutive groups of `size` items; the last group may be shorter."""
+    group: list[dict[str, Any]] = []
+    for item in items:
+        group.append(item)
+        if len(group) == size:
+            yield group
+            group = []
+    if group:
+        yield group
+
+
+def simulate_frames(n_frames: int, seed: int) -> Iterator[dict[str, Any]]:
+    """Encoded frames of the demo scenario: rendered, noised and detected, in order."""
+    rng = np.random.default_rng(seed)
+    camera = CameraModel()
+    base = demo_world()
+    script = demo_script(n_frames)
+    for frame_index, pose in enumerate(demo_trajectory(n_frames)):
+        world = world_at(frame_index, base, script)
+        view = render(world, camera, pose)
+        detections = detect(view, world, rng, **DETECTOR_SETTINGS)
+        depth = add_kinect_noise(view.depth, rng)
+        yield make_frame(
+            f"f{frame_index:06d}",
+            frame_index * FRAME_PERIOD_SECONDS,
+            camera,
+            pose,
+            depth,
+            detections,
+        )
+
+
+def run_robot(
+    base_url: str,
+    *,
+    scene_name: str = "sim-demo",
+    frames: int = 120,
+    frames_per_batch: int = 2,
+    seed: int = 7,
+    pace_seconds: float = 0.0,
+    progress: bool = True,
+    client: httpx.Client | None = None,
+) -> str:
+    """Create a scene, stream the demo run into it batch by batch, and return the scene id."""
+    if frames_per_batch < 1:
+        raise ValueError("frames_per_batch must be at least 1")
+    base_url = base_url.rstrip("/")
+    own_client = client is None
+    http = client if client is not None else httpx.Client(timeout=30.0)
+    try:
+        scene_id = create_scene(http, base_url, scene_name)
+        n_batches = -(-frames // frames_per_batch)
+        frame_groups = _chunks(simulate_frames(frames, seed), frames_per_batch)
+        progress_bar = tqdm(
+            total=frames,
+            desc=f"scene {scene_id}",
+            unit="frame",
+            file=sys.stderr,
+            disable=not progress,
+        )
+        with progress_bar:
+            for batch_index, frame_group in enumerate(frame_groups):
+                batch = make_batch(f"{scene_id}-b{batch_index:05d}", frame_group)
+                post_batch(http, base_url, scene_id, batch)
+                progress_bar.set_postfix(batch=f"{batch_index + 1}/{n_batches}", refresh=False)
+                progress_bar.update(len(frame_group))
+                if pace_seconds > 0:
+                    time.sleep(pace_seconds)
+        return scene_id
+    finally:
+        if own_client:
+            http.close()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Command line: python -m bench.robot --url http://localhost:8000."""
+    parser = argparse.ArgumentParser(description="Stream a simulated robot run into PBD-AG.")
+    parser.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
+    parser.add_argument("--frames", type=int, default=120)
+    parser.add_argument("--frames-per-batch", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--pace", type=float, default=0.0, help="seconds to wait between batches")
+    parser.add_argument("--name", default="sim-demo", help="scene name")
+    args = parser.parse_args(argv)
+    scene_id = run_robot(
+        args.url,
+        scene_name=args.name,
+        frames=args.frames,
+        frames_per_batch=args.frames_per_batch,
+        seed=args.seed,
+        pace_seconds=args.pace,
+    )
+    print(scene_id)
+
+
+if __name__ == "__main__":
+    main()

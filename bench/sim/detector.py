@@ -1,0 +1,98 @@
+"""An oracle 2D detector: ground-truth instance masks degraded by recall, leakage and noise."""
+
+from __future__ import annotations
+
+import functools
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from bench.sim.render import Render
+from bench.sim.world import World
+
+# 8-connected growth, so a leak of k pixels reaches k pixels out diagonally too.
+LEAK_STRUCTURE = np.ones((3, 3), dtype=bool)
+
+
+@dataclass(frozen=True, eq=False)
+class SimDetection:
+    """One detection plus the ground-truth id the service never gets to see."""
+
+    object_id: str
+    label: str
+    score: float
+    mask: np.ndarray  # bool (H, W)
+    embedding: np.ndarray | None  # float64 (dim,), not normalized once noise is added
+    kind: str = "object"
+
+
+@functools.lru_cache(maxsize=256)
+def _unit_embedding(object_id: str, dim: int) -> np.ndarray:
+    """Cached, read-only appearance vector (the public wrapper hands out copies)."""
+    # crc32 rather than hash(): Python salts str hashes per process, crc32 is stable across runs.
+    rng = np.random.default_rng(zlib.crc32(object_id.encode("utf-8")))
+    vector = rng.standard_normal(dim)
+    vector /= np.linalg.norm(vector)
+    vector.setflags(write=False)
+    return vector
+
+
+def object_embedding(object_id: str, dim: int = 64) -> np.ndarray:
+    """The object's fixed unit-norm appearance vector, derived from its id alone."""
+    return _unit_embedding(object_id, dim).copy()
+
+
+def _bounding_slices(mask: np.ndarray, margin: int) -> tuple[slice, slice]:
+    """Row and column slices around the mask's true pixels, grown by `margin` and clipped."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    height, width = mask.shape
+    return (
+        slice(max(rows[0] - margin, 0), min(rows[-1] + margin + 1, height)),
+        slice(max(cols[0] - margin, 0), min(cols[-1] + margin + 1, width)),
+    )
+
+
+def _leak(mask: np.ndarray, leak_px: int) -> np.ndarray:
+    """The mask dilated by `leak_px` pixels, working only on its bounding box for speed."""
+    rows, cols = _bounding_slices(mask, leak_px)
+    grown = mask.copy()
+    grown[rows, cols] = ndimage.binary_dilation(
+        mask[rows, cols], structure=LEAK_STRUCTURE, iterations=leak_px
+    )
+    return grown
+
+
+def detect(
+    render: Render,
+    world: World,
+    rng: np.random.Generator,
+    *,
+    recall: float = 1.0,
+    min_visible_pixels: int = 150,
+    boundary_leak_px: int = 0,
+    embedding_noise: float = 0.0,
+    score: float = 0.9,
+    embedding_dim: int | None = 64,
+) -> list[SimDetection]:
+    """Detections of the objects visible in `render` (fixtures and occluders are never reported)."""
+    visible_pixels = np.bincount(render.instance.ravel() + 1, minlength=len(world.objects) + 1)[1:]
+    detections = []
+    for index, box in enumerate(world.objects):
+        if visible_pixels[index] < min_visible_pixels:
+            continue
+        # One draw per detectable object, in world order, keeps runs reproducible for a seed.
+        if rng.random() >= recall:
+            continue
+        mask = render.instance == index
+        if boundary_leak_px > 0:
+            mask = _leak(mask, boundary_leak_px)
+        embedding = None
+        if embedding_dim is not None:
+            embedding = object_embedding(box.id, embedding_dim)
+            if embedding_noise > 0:
+                embedding += rng.normal(0.0, embedding_noise, size=embedding_dim)
+        detections.append(SimDetection(box.id, box.label, score, mask, embedding))
+    return detections

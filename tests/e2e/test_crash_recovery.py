@@ -1,0 +1,143 @@
+"""SIGKILL right after 20 accepted batches: on restart every batch is done exactly once."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import httpx
+import pytest
+from fastapi.testclient import TestClient
+
+from service.app import create_app
+from service.bootstrap import build_container
+from service.settings import Settings
+from service.worker import Worker
+from tests.conftest import store_backends
+from tests.e2e.simworld import WORLD, batch
+
+BATCHES = 20
+PBDAG = [sys.executable, "-m", "service.cli"]
+REPO = Path(__file__).resolve().parents[2]
+
+
+def stream():
+    """20 one-frame batches: the mug is seen, then taken away."""
+    empty = WORLD.without("mug")
+    return [batch(f"b{i:02d}", WORLD if i < 8 else empty, i) for i in range(BATCHES)]
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def start(args, env, log: Path) -> subprocess.Popen:
+    with log.open("ab") as handle:  # the child keeps its own descriptor
+        return subprocess.Popen(
+            [*PBDAG, *args], env=env, cwd=REPO, stdout=handle, stderr=subprocess.STDOUT
+        )
+
+
+def wait_healthy(url: str, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        try:
+            if httpx.get(f"{url}/healthz", timeout=1.0).status_code == 200:
+                return
+        except httpx.TransportError:
+            pass
+        time.sleep(0.1)
+    raise AssertionError(f"{url} did not become healthy")
+
+
+def outcome(client, scene_id):
+    """What must match an uninterrupted run: the graph and each batch's event count."""
+    graph = client.get(f"/v1/scenes/{scene_id}/graph", params={"include": "all"}).json()
+    nodes = [
+        {k: n[k] for k in ("id", "label", "state", "p_exist", "center")} for n in graph["nodes"]
+    ]
+    events, after = [], -1
+    while after is not None:
+        page = client.get(
+            f"/v1/scenes/{scene_id}/events", params={"after": after, "limit": 1000}
+        ).json()
+        events += page["events"]
+        after = page["next_after"]
+    per_batch = Counter(e["batch_id"] for e in events if e["batch_id"])
+    return nodes, dict(per_batch), [(e["type"], e["track_id"], e["state"]) for e in events]
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The uninterrupted run, in process."""
+    container = build_container(Settings(data_dir=tmp_path_factory.mktemp("reference")))
+    with TestClient(create_app(container)) as client:
+        scene_id = client.post("/v1/scenes", json={"name": "crash"}).json()["id"]
+        for body in stream():
+            assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code == 202
+        Worker(container).drain()
+        return outcome(client, scene_id)
+
+
+def run_with_kill(url: str, start_all, log: Path) -> tuple:
+    """Post 20 batches, SIGKILL every process right after the last 202, restart, wait for done."""
+    processes = start_all(log)
+    wait_healthy(url)
+    with httpx.Client(base_url=url, timeout=30.0) as client:
+        scene_id = client.post("/v1/scenes", json={"name": "crash"}).json()["id"]
+        for body in stream():
+            assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code == 202
+        for process in processes:
+            process.send_signal(signal.SIGKILL)
+        for process in processes:
+            process.wait()
+        processes = start_all(log)
+        try:
+            wait_healthy(url)
+            deadline = time.monotonic() + 120
+            statuses: list[str] = []
+            while time.monotonic() < deadline:
+                statuses = [
+                    client.get(f"/v1/scenes/{scene_id}/batches/b{i:02d}").json()["status"]
+                    for i in range(BATCHES)
+                ]
+                if all(status == "done" for status in statuses):
+                    break
+                assert "dead" not in statuses, log.read_text()[-3000:]
+                time.sleep(0.2)
+            assert all(status == "done" for status in statuses), statuses
+            return outcome(client, scene_id)
+        finally:
+            for process in processes:
+                process.terminate()
+            for process in processes:
+                process.wait(timeout=30)
+
+
+@pytest.mark.parametrize("backend", store_backends())
+def test_sigkill_right_after_accepting_recovers_exactly_once(reference, tmp_path, backend, request):
+    """SQLite: `pbdag serve` with its worker. PostgreSQL: `serve --no-worker` and two `pbdag worker`."""
+    port = free_port()
+    env = {**os.environ, "PBDAG_DATA_DIR": str(tmp_path / "data"), "PBDAG_LEASE_SECONDS": "2"}
+    env.pop("PBDAG_DATABASE_URL", None)
+    if backend == "sqlite":
+        commands = [["serve", "--port", str(port)]]
+    else:
+        url, schema = request.getfixturevalue("postgres_schema_url")
+        env["PBDAG_DATABASE_URL"] = f"{url}?options=-csearch_path%3D{schema}"
+        commands = [["serve", "--port", str(port), "--no-worker"], ["worker"], ["worker"]]
+
+    def start_all(log: Path) -> list[subprocess.Popen]:
+        return [start(command, env, log) for command in commands]
+
+    assert (
+        run_with_kill(f"http://127.0.0.1:{port}", start_all, tmp_path / "service.log") == reference
+    )

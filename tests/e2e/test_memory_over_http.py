@@ -1,0 +1,103 @@
+"""The issue's acceptance scenario, through the HTTP API alone, on every store backend."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from service.app import create_app
+from service.worker import Worker
+from tests.e2e.simworld import MUG_CENTER, OCCLUDER, WORLD, batch
+
+
+@pytest.fixture
+def api(container):
+    """An HTTP client on the app, and a worker the test drives itself."""
+    with TestClient(create_app(container)) as client:
+        yield client, Worker(container)
+
+
+def post(client, worker, scene_id, body):
+    response = client.post(f"/v1/scenes/{scene_id}/batches", json=body)
+    assert response.status_code == 202, response.text
+    worker.drain()
+    status = client.get(f"/v1/scenes/{scene_id}/batches/{body['batch_id']}").json()
+    assert status["status"] == "done", status
+    return status
+
+
+def mug_node(client, scene_id, **params):
+    graph = client.get(f"/v1/scenes/{scene_id}/graph", params=params).json()
+    mugs = [node for node in graph["nodes"] if node["label"] == "mug"]
+    return mugs[0] if mugs else None
+
+
+def published_mug(client, worker):
+    scene_id = client.post("/v1/scenes", json={"name": "kitchen"}).json()["id"]
+    post(client, worker, scene_id, batch("see-0", WORLD, 0))
+    assert mug_node(client, scene_id) is None  # one batch is a hypothesis, not published
+    post(client, worker, scene_id, batch("see-1", WORLD, 1))
+    return scene_id
+
+
+def test_seen_in_two_batches_is_published_within_10cm(api):
+    client, worker = api
+    scene_id = published_mug(client, worker)
+    node = mug_node(client, scene_id)
+    assert node["state"] == "confirmed"
+    assert np.linalg.norm(np.array(node["center"]) - MUG_CENTER) < 0.1
+
+
+def test_taken_away_in_view_is_removed_and_explained(api):
+    client, worker = api
+    scene_id = published_mug(client, worker)
+    track_id = mug_node(client, scene_id)["id"]
+    seq_before_removal = client.get(f"/v1/scenes/{scene_id}").json()["head_seq"]
+    empty = WORLD.without("mug")
+    removed_after = None
+    for i in range(15):
+        post(client, worker, scene_id, batch(f"gone-{i}", empty, 2 + i))
+        if client.get(f"/v1/scenes/{scene_id}/tracks/{track_id}").json()["state"] == "removed":
+            removed_after = i + 1
+            break
+    assert removed_after is not None and removed_after <= 15
+    assert mug_node(client, scene_id) is None
+    explanation = client.get(f"/v1/scenes/{scene_id}/tracks/{track_id}/explain").json()
+    assert explanation["state"] == "removed"
+    assert len(explanation["removal"]["visible_misses"]) >= 3
+    assert all(miss["samples_passed"] >= 2 for miss in explanation["removal"]["visible_misses"])
+    assert "removed" in explanation["summary"]
+    # time travel: before the removal the mug is still in the graph
+    old = mug_node(client, scene_id, as_of=seq_before_removal)
+    assert old is not None and old["id"] == track_id
+
+
+@pytest.mark.parametrize("hidden", ["occluded", "out_of_view"])
+def test_hidden_or_out_of_view_for_30_batches_stays_published_unchanged(api, hidden):
+    client, worker = api
+    scene_id = published_mug(client, worker)
+    before = mug_node(client, scene_id)
+    head = client.get(f"/v1/scenes/{scene_id}").json()["head_seq"]
+    world = WORLD.with_occluder(OCCLUDER) if hidden == "occluded" else WORLD
+    for i in range(30):
+        post(
+            client,
+            worker,
+            scene_id,
+            batch(f"{hidden}-{i}", world, 2 + i, look_away=hidden == "out_of_view"),
+        )
+    after = mug_node(client, scene_id)
+    assert after["id"] == before["id"] and after["state"] == "confirmed"
+    assert after["p_exist"] == before["p_exist"]
+    assert client.get(f"/v1/scenes/{scene_id}").json()["head_seq"] == head  # no event at all
+
+
+def test_as_of_beyond_head_is_a_404_problem(api):
+    client, worker = api
+    scene_id = published_mug(client, worker)
+    head = client.get(f"/v1/scenes/{scene_id}").json()["head_seq"]
+    response = client.get(f"/v1/scenes/{scene_id}/graph", params={"as_of": head + 1})
+    assert response.status_code == 404
+    assert response.headers["content-type"] == "application/problem+json"
+    assert response.json()["field"] == "as_of"
