@@ -6,7 +6,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy import ndimage
 
 from core.observation import Detection, Frame, Intrinsics
 from core.params import ProposalParams
@@ -50,20 +49,43 @@ def world_to_camera(points: FloatArray, pose: FloatArray) -> FloatArray:
     return (points - pose[:3, 3]) @ rotation
 
 
-def interior_pixels(mask: npt.NDArray[np.bool_], erosion_px: int) -> npt.NDArray[np.intp]:
-    """Flat indices of the mask eroded by `erosion_px` (computed on the mask's bounding box)."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    cols = np.flatnonzero(mask.any(axis=0))
-    if rows.size == 0 or erosion_px <= 0:
-        return np.flatnonzero(mask)
-    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
-    crop = np.pad(mask[r0:r1, c0:c1], erosion_px)
-    eroded = ndimage.binary_erosion(crop, iterations=erosion_px)[
-        erosion_px:-erosion_px, erosion_px:-erosion_px
-    ]
-    local_rows, local_cols = np.nonzero(eroded)
-    flat: npt.NDArray[np.intp] = (local_rows + r0) * mask.shape[1] + (local_cols + c0)
+def interior_pixels(
+    mask: npt.NDArray[np.bool_], flat_index: npt.NDArray[np.intp], erosion_px: int
+) -> npt.NDArray[np.intp]:
+    """Flat indices of the mask eroded by `erosion_px`, computed on the mask's bounding box only."""
+    if flat_index.size == 0 or erosion_px <= 0:
+        return flat_index
+    width = mask.shape[1]
+    r0, r1 = int(flat_index[0] // width), int(flat_index[-1] // width) + 1  # indices are sorted
+    cols = flat_index % width
+    c0, c1 = int(cols.min()), int(cols.max()) + 1
+    local_rows, local_cols = np.nonzero(erode_square(mask[r0:r1, c0:c1], erosion_px))
+    flat: npt.NDArray[np.intp] = (local_rows + r0) * width + (local_cols + c0)
     return flat
+
+
+def erode_square(mask: npt.NDArray[np.bool_], radius: int) -> npt.NDArray[np.bool_]:
+    """Binary erosion by a (2r+1)^2 square, separable: outside the array counts as background."""
+    height, width = mask.shape
+    padded = np.pad(mask, radius)
+    across = np.ones((height + 2 * radius, width), dtype=bool)
+    for shift in range(2 * radius + 1):
+        across &= padded[:, shift : shift + width]
+    eroded = np.ones((height, width), dtype=bool)
+    for shift in range(2 * radius + 1):
+        eroded &= across[shift : shift + height, :]
+    return eroded
+
+
+def sorted_quantiles(sorted_columns: FloatArray, fractions: tuple[float, ...]) -> FloatArray:
+    """Linear-interpolated quantiles (numpy's default method) of columns sorted along axis 0."""
+    count = sorted_columns.shape[0]
+    positions = np.asarray(fractions) * (count - 1)
+    low = np.floor(positions).astype(np.intp)
+    high = np.minimum(low + 1, count - 1)
+    weight = (positions - low)[:, None]
+    result: FloatArray = sorted_columns[low] * (1.0 - weight) + sorted_columns[high] * weight
+    return result
 
 
 def robust_depth_inliers(
@@ -71,7 +93,7 @@ def robust_depth_inliers(
 ) -> npt.NDArray[np.bool_]:
     """Median/MAD gate on mask depths around a reference: drops background leaked into the mask."""
     median = float(np.median(reference_depth_m))
-    mad = 1.4826 * float(np.median(np.abs(reference_depth_m - median)))
+    mad = 1.4826 * float(np.median(np.abs(reference_depth_m - median)))  # robust sigma
     band = max(params.depth_inlier_min_band_m, params.depth_inlier_mad_k * mad)
     return np.abs(depth_m - median) <= band
 
@@ -91,7 +113,9 @@ def ground_detection(
         return None
     flat_index, depth_m = flat_index[in_range], depth_m[in_range]
     # Leakage sits on the mask's rim: anchor the median on the interior when it is large enough.
-    interior_depth = frame.depth.reshape(-1)[interior_pixels(detection.mask, params.boundary_erosion_px)]
+    interior_depth = frame.depth.reshape(-1)[
+        interior_pixels(detection.mask, flat_index, params.boundary_erosion_px)
+    ]
     interior: FloatArray = interior_depth[
         (interior_depth >= min_range_m) & (interior_depth <= max_range_m)
     ].astype(np.float64)
@@ -102,7 +126,11 @@ def ground_detection(
     points = camera_to_world(
         backproject_pixels(flat_index[inliers], depth_m[inliers], frame.intrinsics), frame.pose
     )
-    low, high = np.percentile(points, params.extent_percentiles, axis=0)
+    # One column sort gives the robust median center and the percentile box.
+    low_fraction, high_fraction = (p / 100.0 for p in params.extent_percentiles)
+    low, median, high = sorted_quantiles(
+        np.sort(points, axis=0), (low_fraction, 0.5, high_fraction)
+    )
     extent = np.maximum(high - low, params.min_extent_m)
     embedding = None
     if detection.embedding is not None:
@@ -112,7 +140,7 @@ def ground_detection(
         label=detection.label,
         score=detection.score,
         kind=detection.kind,
-        center=np.median(points, axis=0),
+        center=median,
         extent=extent,
         embedding=embedding,
         valid_pixels=int(inliers.sum()),

@@ -44,7 +44,7 @@ class Track:
     visible_misses: int = 0  # visibility-admissible misses since the last positive batch
     published_center: Vec3 | None = None  # where the graph last said the track is
 
-    @property
+    @cached_property
     def label(self) -> str:
         """Most supported class; ties broken by name so the choice is deterministic."""
         return min(self.class_evidence.items(), key=lambda item: (-item[1], item[0]))[0]

@@ -62,13 +62,14 @@ def _window_depth(
     rows = np.clip(v[:, None, None] + offsets[None, :, None], 0, height - 1)
     cols = np.clip(u[:, None, None] + offsets[None, None, :], 0, width - 1)
     window = depth[rows, cols].reshape(len(u), -1).astype(np.float64)
-    valid = (window >= params.min_range_m) & (window <= params.max_range_m) & np.isfinite(window)
-    window = np.where(valid, window, np.nan)
+    valid = (window >= params.min_range_m) & (window <= params.max_range_m)
+    # Median of the valid values per row: invalid ones sort to the end as +inf.
+    window = np.sort(np.where(valid, window, np.inf), axis=1)
     counts = valid.sum(axis=1)
-    measured = np.zeros(len(u), dtype=np.float64)
-    rows_with_depth = counts > 0
-    if rows_with_depth.any():
-        measured[rows_with_depth] = np.nanmedian(window[rows_with_depth], axis=1)
+    rows_index = np.arange(len(u))
+    upper = window[rows_index, counts // 2]
+    lower = window[rows_index, np.maximum(counts - 1, 0) // 2]
+    measured: FloatArray = np.where(counts > 0, 0.5 * (upper + lower), 0.0)
     return measured
 
 

@@ -20,24 +20,35 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="pbdag", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
 
-    serve = commands.add_parser("serve", help="run the HTTP API (with an in-process worker by default)")
+    serve = commands.add_parser(
+        "serve", help="run the HTTP API (with an in-process worker by default)"
+    )
     serve.add_argument("--host", default="127.0.0.1")
     serve.add_argument("--port", type=int, default=8000)
-    serve.add_argument("--no-worker", action="store_true", help="API only; run `pbdag worker` separately")
+    serve.add_argument(
+        "--no-worker", action="store_true", help="API only; run `pbdag worker` separately"
+    )
 
-    worker = commands.add_parser("worker", help="process queued batches (several may share one PostgreSQL)")
+    worker = commands.add_parser(
+        "worker", help="process queued batches (several may share one PostgreSQL)"
+    )
     worker.add_argument("--drain", action="store_true", help="exit once the queue is empty")
 
     commands.add_parser("migrate", help="create or upgrade the database schema")
 
-    rebuild = commands.add_parser("rebuild", help="drop every projection, rebuild it from the log, report differences")
+    rebuild = commands.add_parser(
+        "rebuild", help="drop every projection, rebuild it from the log, report differences"
+    )
     rebuild.add_argument("--scene", action="append", help="only these scenes (repeatable)")
 
     openapi = commands.add_parser("openapi", help="write the OpenAPI document")
     openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
 
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
+    )
+    logging.getLogger("alembic").setLevel(logging.WARNING)
     handlers = {
         "serve": _serve,
         "worker": _worker,
@@ -54,7 +65,9 @@ def _serve(args: argparse.Namespace) -> int:
     from service.app import create_app
 
     settings = Settings()
-    print(f"pbdag: database {_redacted(settings.resolved_database_url())}, data in {settings.data_dir.resolve()}")
+    print(
+        f"pbdag: database {_redacted(settings.resolved_database_url())}, data in {settings.data_dir.resolve()}"
+    )
     print(f"pbdag: API on http://{args.host}:{args.port} (docs at /docs)", flush=True)
     app = create_app(run_worker=not args.no_worker)
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
@@ -98,7 +111,11 @@ def _rebuild(args: argparse.Namespace) -> int:
         verdict = "identical" if report.identical else "DIFFERED"
         print(
             f"{scene_id}: {report.events} events replayed; tracks and snapshots {verdict}"
-            + (f" (tracks {report.tracks_differ}, snapshots {report.snapshots_differ})" if not report.identical else "")
+            + (
+                f" (tracks {report.tracks_differ}, snapshots {report.snapshots_differ})"
+                if not report.identical
+                else ""
+            )
         )
         differed |= not report.identical
     print("rebuild: projections differed from the log" if differed else "rebuild: no difference")
@@ -111,7 +128,9 @@ def _openapi(args: argparse.Namespace) -> int:
     from service.store.blobs import MemoryBlobStore
     from service.store.engine import make_engine
 
-    container = build_container(Settings(), blobs=MemoryBlobStore(), engine=make_engine("sqlite://"))
+    container = build_container(
+        Settings(), blobs=MemoryBlobStore(), engine=make_engine("sqlite://")
+    )
     document = create_app(container).openapi()
     args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")
     print(f"wrote {args.out}")

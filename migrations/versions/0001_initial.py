@@ -39,7 +39,10 @@ def upgrade() -> None:
     op.create_table(
         "batches",
         sa.Column(
-            "id", sa.BigInteger().with_variant(sa.Integer, "sqlite"), primary_key=True, autoincrement=True
+            "id",
+            sa.BigInteger().with_variant(sa.Integer, "sqlite"),
+            primary_key=True,
+            autoincrement=True,
         ),
         sa.Column("scene_id", sa.String(64), sa.ForeignKey("scenes.id"), nullable=False),
         sa.Column("batch_id", sa.String(200), nullable=False),

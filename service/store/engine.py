@@ -70,12 +70,28 @@ def read_transaction(engine: sa.Engine) -> Iterator[sa.Connection]:
         yield connection
 
 
+MIGRATION_LOCK_KEY = 0x70626461  # PostgreSQL advisory lock held while migrating
+
+
 def migrate(engine: sa.Engine) -> None:
-    """Bring the schema to the newest Alembic revision."""
+    """Bring the schema to the newest Alembic revision; safe when several processes start at once."""
     config = Config()
     config.set_main_option("script_location", str(MIGRATIONS_DIR))
-    with engine.connect() as connection:
-        config.attributes["connection"] = connection
-        command.upgrade(config, "head")
-        if connection.in_transaction():
+    # SQLite: alembic's transaction begins IMMEDIATE; PostgreSQL: an advisory lock serializes.
+    with engine.connect().execution_options(**{IMMEDIATE: True}) as connection:
+        if not is_sqlite(engine):
+            connection.execute(
+                sa.text("SELECT pg_advisory_lock(:key)"), {"key": MIGRATION_LOCK_KEY}
+            )
             connection.commit()
+        try:
+            config.attributes["connection"] = connection
+            command.upgrade(config, "head")
+            if connection.in_transaction():
+                connection.commit()
+        finally:
+            if not is_sqlite(engine):
+                connection.execute(
+                    sa.text("SELECT pg_advisory_unlock(:key)"), {"key": MIGRATION_LOCK_KEY}
+                )
+                connection.commit()

@@ -202,3 +202,15 @@ def test_decide_is_deterministic():
         [(e.type, e.track_id, dict(e.details)) for e in ev] for ev in run(SceneState(), batches)[1]
     ]
     assert first == second
+
+
+def test_square_erosion_matches_scipy():
+    from scipy import ndimage
+
+    from core.geometry import erode_square
+
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        mask = ndimage.binary_dilation(rng.random((30, 40)) > 0.93, iterations=3)
+        expected = ndimage.binary_erosion(mask, structure=np.ones((5, 5), bool), border_value=0)
+        assert np.array_equal(erode_square(mask, 2), expected)

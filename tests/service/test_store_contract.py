@@ -9,7 +9,7 @@ from core.events import TrackAdded, TrackUpdated
 from core.evolve import fold
 from core.params import Params
 from core.state import SceneState
-from service.store.engine import write_transaction
+from service.store.engine import make_engine, write_transaction
 from service.store.errors import (
     BatchConflict,
     ConcurrencyConflict,
@@ -231,3 +231,34 @@ def test_initial_state_is_empty(container):
     scene = container.log.create_scene("s", Params())
     state = container.log.load_state(scene.id)
     assert state.head_seq == 0 and state.tracks == {} and isinstance(state, SceneState)
+
+
+def test_concurrent_migrations_are_serialized(backend, tmp_path, request):
+    """API and workers all run `pbdag migrate` work at startup; on a fresh database they must not race."""
+    import os
+    import subprocess
+    import sys
+
+    if backend == "sqlite":
+        url = f"sqlite:///{tmp_path / 'fresh.db'}"
+    else:
+        base, schema = request.getfixturevalue("postgres_schema_url")
+        url = f"{base}?options=-csearch_path%3D{schema}"
+    env = {**os.environ, "PBDAG_DATABASE_URL": url, "PBDAG_DATA_DIR": str(tmp_path / "data")}
+    processes = [
+        subprocess.Popen(
+            [sys.executable, "-m", "service.cli", "migrate"], env=env, stderr=subprocess.PIPE
+        )
+        for _ in range(4)
+    ]
+    errors = [process.communicate(timeout=120)[1].decode() for process in processes]
+    assert [process.returncode for process in processes] == [0, 0, 0, 0], errors
+    engine = make_engine(url)
+    try:
+        with engine.connect() as connection:
+            assert (
+                connection.exec_driver_sql("select version_num from alembic_version").scalar()
+                == "0001"
+            )
+    finally:
+        engine.dispose()

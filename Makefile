@@ -1,0 +1,46 @@
+# PBD-AG: `make demo` runs the service fed by a simulated robot; `make test` runs every check.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+BIN := $(VENV)/bin
+
+.PHONY: setup demo serve test lint format openapi bench clean
+
+setup: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml
+	@bash scripts/system-deps.sh
+	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info[:2] == (3, 11) else "PBD-AG needs Python 3.11")'
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/pip install --quiet --upgrade pip
+	$(BIN)/pip install --quiet -e '.[dev]'
+	@touch $@
+
+demo: setup  ## the service on SQLite, fed live by the simulated robot
+	$(BIN)/python -m bench.demo_service
+
+serve: setup  ## the API with its in-process worker
+	$(BIN)/pbdag serve
+
+test: setup lint  ## lint, types, then the whole test suite (PostgreSQL tests when a server answers)
+	$(BIN)/pytest
+
+lint: setup
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/mypy
+
+format: setup
+	$(BIN)/ruff format .
+	$(BIN)/ruff check --fix .
+
+openapi: setup  ## regenerate api_schema/openapi.json from the app
+	$(BIN)/pbdag openapi
+
+bench: setup  ## the performance benchmarks (figures printed and written to bench/results/)
+	$(BIN)/python -m bench.bench_render
+	$(BIN)/python -m bench.bench_decide
+	$(BIN)/python -m bench.bench_store append --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
+	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
+
+clean:
+	rm -rf $(VENV) data bench/results .pytest_cache .mypy_cache .ruff_cache

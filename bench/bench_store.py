@@ -1,0 +1,191 @@
+"""Benchmarks of the store: events appended per second, and as_of against a full replay.
+
+    python -m bench.bench_store append [--events 50000] [--batch 500] [--postgres URL]
+    python -m bench.bench_store as-of  [--events 1000000] [--queries 50] [--postgres URL]
+
+SQLite (a temporary file) always; PostgreSQL too when --postgres is given (a fresh schema,
+dropped afterwards). Figures are printed and written to bench/results/store-*.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import statistics
+import sys
+import tempfile
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import sqlalchemy as sa
+from tqdm import tqdm
+
+from bench.perf_common import synthetic_events, write_results
+from core.evolve import fold
+from core.params import Params
+from service.store.engine import make_engine, migrate, write_transaction
+from service.store.event_log import EventLog, snapshot_due
+
+
+@contextmanager
+def engines(postgres_url: str | None) -> Iterator[list[tuple[str, sa.Engine]]]:
+    """A migrated SQLite file, and a fresh PostgreSQL schema when a URL is given."""
+    with tempfile.TemporaryDirectory() as folder:
+        built = [("sqlite", make_engine(f"sqlite:///{Path(folder) / 'bench.db'}"))]
+        schema = f"pbdag_bench_{uuid.uuid4().hex[:8]}"
+        if postgres_url:
+            with sa.create_engine(postgres_url).begin() as connection:
+                connection.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
+            built.append(
+                (
+                    "postgres",
+                    make_engine(postgres_url, connect_args={"options": f"-csearch_path={schema}"}),
+                )
+            )
+        for _, engine in built:
+            migrate(engine)
+        try:
+            yield built
+        finally:
+            for _, engine in built:
+                engine.dispose()
+            if postgres_url:
+                with sa.create_engine(postgres_url).begin() as connection:
+                    connection.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
+
+
+def append_all(
+    log: EventLog,
+    scene_id: str,
+    n_events: int,
+    batch: int,
+    snapshot_interval: int = 0,
+    progress: bool = False,
+) -> float:
+    """Append a synthetic log in batches (with snapshots when asked); seconds spent in the store."""
+    state = log.load_state(scene_id)  # seq 0: the scene's creation, with its name and params
+    head, store_seconds = state.head_seq, 0.0
+    stream = synthetic_events(n_events)
+    bar = tqdm(
+        total=n_events, unit="event", disable=not progress, file=sys.stderr, desc="appending"
+    )
+    while chunk := list(itertools.islice(stream, batch)):
+        new_state = fold(state, chunk) if snapshot_interval else state
+        started = time.perf_counter()
+        with write_transaction(log.engine) as connection:
+            log.append(connection, scene_id, head, chunk)
+            if snapshot_interval and snapshot_due(head, head + len(chunk), snapshot_interval):
+                log.save_snapshot(connection, scene_id, new_state)
+        store_seconds += time.perf_counter() - started
+        head += len(chunk)
+        state = new_state
+        bar.update(len(chunk))
+    bar.close()
+    return store_seconds
+
+
+def bench_append(args: argparse.Namespace) -> None:
+    """Events appended per second, in batches, per backend."""
+    results: dict[str, Any] = {
+        "events": args.events,
+        "batch": args.batch,
+        "goal_events_per_s": 20000,
+    }
+    with engines(args.postgres) as built:
+        for name, engine in built:
+            log = EventLog(engine)
+            scene = log.create_scene("bench", Params())
+            seconds = append_all(log, scene.id, args.events, args.batch)
+            rate = args.events / seconds
+            results[name] = {"seconds": seconds, "events_per_s": rate}
+            print(
+                f"{name:>8}: {rate:,.0f} events/s appended in batches of {args.batch} (goal > 20,000)"
+            )
+    write_results("store-append", results)
+
+
+def bench_as_of(args: argparse.Namespace) -> None:
+    """as_of latency (snapshot + tail) on a long log against a full replay."""
+    results: dict[str, Any] = {"events": args.events, "snapshot_interval": args.snapshot_interval}
+    rng = np.random.default_rng(0)
+    with engines(args.postgres) as built:
+        for name, engine in built:
+            log = EventLog(engine)
+            scene = log.create_scene("bench", Params())
+            print(
+                f"{name}: writing {args.events:,} events with a snapshot every {args.snapshot_interval} ..."
+            )
+            append_all(log, scene.id, args.events - 1, 1000, args.snapshot_interval, progress=True)
+            head = log.scene(scene.id).head_seq
+            targets = rng.integers(1, head + 1, size=args.queries)
+            latencies = []
+            for target in targets:
+                started = time.perf_counter()
+                log.load_state(scene.id, int(target))
+                latencies.append(1000 * (time.perf_counter() - started))
+            started = time.perf_counter()
+            replayed = log.replay(scene.id)
+            replay_ms = 1000 * (time.perf_counter() - started)
+            check = log.load_state(scene.id)
+            assert check.to_dict() == replayed.to_dict(), "snapshot + tail differs from the replay"
+            median = statistics.median(latencies)
+            results[name] = {
+                "head_seq": head,
+                "as_of_median_ms": median,
+                "as_of_p90_ms": statistics.quantiles(latencies, n=10)[-1],
+                "full_replay_ms": replay_ms,
+                "speedup": replay_ms / median,
+                "database_bytes": database_bytes(engine),
+            }
+            print(
+                f"{name:>8}: as_of median {median:.1f} ms (p90 {results[name]['as_of_p90_ms']:.1f}) vs full replay "
+                f"{replay_ms / 1000:.1f} s: {replay_ms / median:,.0f}x faster (goal < 50 ms and >= 50x)"
+            )
+    write_results("store-as-of", results)
+
+
+def database_bytes(engine: sa.Engine) -> int | None:
+    """Size of the database (SQLite file or PostgreSQL schema tables)."""
+    with engine.connect() as connection:
+        if engine.dialect.name == "sqlite":
+            pages = connection.exec_driver_sql("PRAGMA page_count").scalar() or 0
+            size = connection.exec_driver_sql("PRAGMA page_size").scalar() or 0
+            return int(pages) * int(size)
+        return int(
+            connection.execute(
+                sa.text(
+                    "select sum(pg_total_relation_size(c.oid)) from pg_class c "
+                    "join pg_namespace n on n.oid = c.relnamespace "
+                    "where n.nspname = current_schema() and c.relkind = 'r'"
+                )
+            ).scalar()
+            or 0
+        )
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Command line."""
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    commands = parser.add_subparsers(dest="command", required=True)
+    append = commands.add_parser("append")
+    append.add_argument("--events", type=int, default=50_000)
+    append.add_argument("--batch", type=int, default=500)
+    append.add_argument("--postgres", help="also measure on this PostgreSQL URL")
+    as_of = commands.add_parser("as-of")
+    as_of.add_argument("--events", type=int, default=1_000_000)
+    as_of.add_argument("--snapshot-interval", type=int, default=1000)
+    as_of.add_argument("--queries", type=int, default=50)
+    as_of.add_argument("--postgres", help="also measure on this PostgreSQL URL")
+    args = parser.parse_args(argv)
+    {"append": bench_append, "as-of": bench_as_of}[args.command](args)
+
+
+if __name__ == "__main__":
+    main()

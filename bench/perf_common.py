@@ -1,0 +1,107 @@
+"""Shared pieces of the performance benchmarks: result files and synthetic event streams."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.events import Event, TrackAdded, TrackUpdated
+
+RESULTS_DIR = Path(__file__).resolve().parent / "results"
+EMBEDDING_DIM = 64
+
+
+def write_results(name: str, results: dict[str, Any]) -> Path:
+    """Save a benchmark's figures as JSON under bench/results/ (git-ignored)."""
+    results = {"machine": platform.machine(), "cpu_count": os.cpu_count(), **results}
+    path = RESULTS_DIR / f"{name}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(results, indent=2) + "\n")
+    print(f"wrote {path}")
+    return path
+
+
+def observation(rng: np.random.Generator, center: np.ndarray, frame_id: str) -> dict[str, Any]:
+    """One observation as decide writes it."""
+    return {
+        "frame_id": frame_id,
+        "label": "mug",
+        "score": 0.9,
+        "center": [float(v) for v in center],
+        "extent": [0.08, 0.08, 0.1],
+        "valid_pixels": int(rng.integers(200, 2000)),
+        "parent": None,
+    }
+
+
+def synthetic_events(n_events: int, n_tracks: int = 500, seed: int = 0) -> Iterator[Event]:
+    """A realistic log: `n_tracks` adds, then observed updates (with 64-d appearance) and misses."""
+    rng = np.random.default_rng(seed)
+    centers = rng.uniform([0, 0, 0.5], [8, 6, 1.2], size=(n_tracks, 3))
+    logodds = np.zeros(n_tracks)
+    misses = np.zeros(n_tracks, dtype=int)
+    batches = np.zeros(n_tracks, dtype=int)
+    for index in range(n_events):
+        frame_id = f"f{index:07d}"
+        if index < n_tracks:
+            logodds[index], batches[index] = 1.0, 1
+            yield TrackAdded(
+                f"trk-{index + 1:06d}",
+                "tentative",
+                frame_id,
+                {
+                    "kind": "object",
+                    "observations": [observation(rng, centers[index], frame_id)],
+                    "embedding_sum": [float(v) for v in rng.normal(size=EMBEDDING_DIM)],
+                    "embedding_count": 1,
+                    "timestamp": float(index),
+                    "existence_logodds": 1.0,
+                    "p_exist": 0.731,
+                    "batches_observed": 1,
+                },
+            )
+            continue
+        track = int(rng.integers(n_tracks))
+        track_id = f"trk-{track + 1:06d}"
+        if rng.random() < 0.6:
+            centers[track] += rng.normal(0, 0.01, size=3)
+            logodds[track] = min(4.0, logodds[track] + 1.0)
+            misses[track], batches[track] = 0, batches[track] + 1
+            yield TrackUpdated(
+                track_id,
+                "confirmed",
+                frame_id,
+                {
+                    "evidence": "observed",
+                    "observations": [observation(rng, centers[track], frame_id)],
+                    "embedding_sum": [float(v) for v in rng.normal(size=EMBEDDING_DIM)],
+                    "embedding_count": 1,
+                    "timestamp": float(index),
+                    "existence_logodds": float(logodds[track]),
+                    "p_exist": float(1 / (1 + np.exp(-logodds[track]))),
+                    "batches_observed": int(batches[track]),
+                    "reacquired": False,
+                },
+            )
+        else:
+            logodds[track] = max(-4.0, logodds[track] - 0.7)
+            misses[track] += 1
+            yield TrackUpdated(
+                track_id,
+                "confirmed",
+                frame_id,
+                {
+                    "evidence": "visible_miss",
+                    "samples_passed": int(rng.integers(2, 28)),
+                    "samples_total": 27,
+                    "existence_logodds": float(logodds[track]),
+                    "p_exist": float(1 / (1 + np.exp(-logodds[track]))),
+                    "visible_misses": int(misses[track]),
+                },
+            )
