@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Iterable, Mapping
-from dataclasses import replace
 from typing import Any
 
 from core.events import (
@@ -49,13 +49,13 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
             tracks[track_id] = _apply_update(track, event, params)
         elif isinstance(event, TrackConfirmed):
             published = track.published_center or _vec3(event.details["center"])
-            tracks[track_id] = replace(track, lifecycle="confirmed", published_center=published)
+            tracks[track_id] = track.evolved(lifecycle="confirmed", published_center=published)
         elif isinstance(event, TrackMoved):
-            tracks[track_id] = replace(track, published_center=_vec3(event.details["to"]))
+            tracks[track_id] = track.evolved(published_center=_vec3(event.details["to"]))
         elif isinstance(event, TrackReparented):
-            tracks[track_id] = replace(track, parent=event.details.get("new_parent"))
+            tracks[track_id] = track.evolved(parent=event.details.get("new_parent"))
         elif isinstance(event, TrackDemoted | TrackRemoved):
-            tracks[track_id] = replace(track, lifecycle=str(event.state))
+            tracks[track_id] = track.evolved(lifecycle=str(event.state))
         else:
             raise ValueError(f"no evolve rule for event type {event.type!r}")
     return SceneState(
@@ -85,8 +85,7 @@ def _apply_update(track: Track, event: Event, params: Params) -> Track:
     if event.details["evidence"] == "observed":
         return _observe(track, event, params)
     # A visibility-admissible miss: only existence and the miss count change.
-    return replace(
-        track,
+    return track.evolved(
         existence_logodds=float(event.details["existence_logodds"]),
         visible_misses=int(event.details["visible_misses"]),
         lifecycle=str(event.state),
@@ -115,11 +114,10 @@ def _observe(track: Track, event: Event, params: Params) -> Track:
         embedding_sum = (
             tuple(float(v) for v in batch_sum)
             if embedding_sum is None
-            else tuple(a + b for a, b in zip(embedding_sum, batch_sum, strict=True))
+            else tuple(map(operator.add, embedding_sum, batch_sum))
         )
     last = observations[-1]
-    return replace(
-        track,
+    return track.evolved(
         lifecycle=str(event.state),
         class_evidence=class_evidence,
         parent_evidence=parent_evidence,

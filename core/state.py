@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Any
 
@@ -43,6 +43,19 @@ class Track:
     batches_observed: int = 0  # distinct positive batches since (re)acquisition
     visible_misses: int = 0  # visibility-admissible misses since the last positive batch
     published_center: Vec3 | None = None  # where the graph last said the track is
+
+    def evolved(self, **changes: Any) -> Track:
+        """A copy with `changes` (what dataclasses.replace does, without its per-field cost).
+
+        Cached derived values (the label) are dropped so they are recomputed from the new fields.
+        """
+        unknown = changes.keys() - _TRACK_FIELDS
+        if unknown:
+            raise TypeError(f"Track has no field {sorted(unknown)}")
+        copy = object.__new__(Track)
+        fields_now = {key: value for key, value in self.__dict__.items() if key in _TRACK_FIELDS}
+        copy.__dict__.update(fields_now, **changes)
+        return copy
 
     @cached_property
     def label(self) -> str:
@@ -107,7 +120,7 @@ class Track:
 
     @classmethod
     def from_dict(cls, record: Mapping[str, Any]) -> Track:
-        """Inverse of `to_dict`."""
+        """Inverse of `to_dict` (whose JSON numbers load back as floats: no per-element coercion)."""
         embedding_sum = record["embedding_sum"]
         published = record["published_center"]
         return cls(
@@ -118,7 +131,7 @@ class Track:
             existence_logodds=float(record["existence_logodds"]),
             center=_vec3(record["center"]),
             extent=_vec3(record["extent"]),
-            recent_centers=tuple(_vec3(c) for c in record["recent_centers"]),
+            recent_centers=tuple(map(tuple, record["recent_centers"])),
             parent_evidence=dict(record["parent_evidence"]),
             parent=record["parent"],
             embedding_sum=None if embedding_sum is None else tuple(embedding_sum),
@@ -129,6 +142,9 @@ class Track:
             visible_misses=int(record["visible_misses"]),
             published_center=None if published is None else _vec3(published),
         )
+
+
+_TRACK_FIELDS = frozenset(f.name for f in fields(Track))
 
 
 def _vec3(values: Any) -> Vec3:

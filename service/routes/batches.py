@@ -17,19 +17,7 @@ router = APIRouter(prefix="/v1/scenes/{scene_id}/batches", tags=["batches"])
 
 def batch_out(record: BatchRecord) -> BatchStatus:
     """Wire form of a queue row."""
-    return BatchStatus(
-        batch_id=record.batch_id,
-        scene_id=record.scene_id,
-        status=record.status,  # type: ignore[arg-type]
-        attempts=record.attempts,
-        frame_count=record.frame_count,
-        content_sha256=record.content_sha256,
-        first_seq=record.first_seq,
-        last_seq=record.last_seq,
-        error=record.error,
-        received_at=record.received_at,
-        finished_at=record.finished_at,
-    )
+    return BatchStatus.model_validate(record, from_attributes=True)
 
 
 @router.post(

@@ -15,16 +15,7 @@ router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["events"])
 
 def event_out(event: StoredEvent) -> EventOut:
     """Wire form of a log row."""
-    return EventOut(
-        seq=event.seq,
-        type=event.type,
-        track_id=event.track_id,
-        state=event.state,
-        batch_id=event.batch_id,
-        frame_id=event.frame_id,
-        recorded_at=event.recorded_at,
-        details=event.details,
-    )
+    return EventOut.model_validate(event, from_attributes=True)
 
 
 @router.get("/events", response_model=EventPage)

@@ -23,13 +23,7 @@ class InvalidParams(ProblemError):
 
 def scene_out(record: SceneRecord) -> Scene:
     """Wire form of a scene row."""
-    return Scene(
-        id=record.id,
-        name=record.name,
-        head_seq=record.head_seq,
-        created_at=record.created_at,
-        params=record.params,
-    )
+    return Scene.model_validate(record, from_attributes=True)
 
 
 @router.post("", status_code=201, response_model=Scene)

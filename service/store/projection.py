@@ -11,9 +11,9 @@ import sqlalchemy as sa
 
 from core.events import Event
 from core.evolve import fold
-from core.state import SNAPSHOT_FORMAT_VERSION, SceneState, Track
+from core.state import SceneState, Track
 from service.store.engine import read_transaction, write_transaction
-from service.store.event_log import EventLog, encode_snapshot
+from service.store.event_log import SNAPSHOT_VERSION, EventLog, encode_snapshot
 from service.store.tables import snapshots, tracks
 
 
@@ -132,7 +132,7 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
         for seq, body in sorted(new_snapshots.items()):
             connection.execute(
                 snapshots.insert().values(
-                    scene_id=scene_id, seq=seq, format_version=SNAPSHOT_FORMAT_VERSION, body=body
+                    scene_id=scene_id, seq=seq, format_version=SNAPSHOT_VERSION, body=body
                 )
             )
     report = SceneRebuild(scene_id, count)

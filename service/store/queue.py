@@ -50,6 +50,15 @@ class Claim:
     attempts: int
 
 
+def held_by(claim: Claim) -> sa.ColumnElement[bool]:
+    """The lease fence: the batch is still running under this claim's owner."""
+    return sa.and_(
+        batches.c.id == claim.id,
+        batches.c.lease_owner == claim.owner,
+        batches.c.status == "running",
+    )
+
+
 def _record(row: sa.Row[Any]) -> BatchRecord:
     return BatchRecord(**{column.name: row._mapping[column.name] for column in batches.columns})
 
@@ -168,11 +177,7 @@ class BatchQueue:
         with write_transaction(self.engine) as connection:
             updated = connection.execute(
                 sa.update(batches)
-                .where(
-                    batches.c.id == claim.id,
-                    batches.c.lease_owner == claim.owner,
-                    batches.c.status == "running",
-                )
+                .where(held_by(claim))
                 .values(
                     status=status,
                     lease_owner=None,
@@ -191,11 +196,7 @@ class BatchQueue:
         first_seq, last_seq = seqs if seqs is not None else (None, None)
         updated = connection.execute(
             sa.update(batches)
-            .where(
-                batches.c.id == claim.id,
-                batches.c.lease_owner == claim.owner,
-                batches.c.status == "running",
-            )
+            .where(held_by(claim))
             .values(
                 status="done",
                 lease_owner=None,

@@ -5,6 +5,7 @@ from __future__ import annotations
 from functools import reduce
 
 import orjson
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -68,3 +69,14 @@ def test_snapshot_plus_tail_equals_full_replay_and_prefixes_are_stable(steps, da
     # the state at a prefix never depends on what came after it
     assert fold(SceneState(), log[:cut]).to_dict() == prefix_state.to_dict()
     assert prefix_state.head_seq == cut - 1
+
+
+def test_evolved_copies_fields_and_drops_the_cached_label():
+    _log, live = live_run([{"mug_1": 0, "book_1": None, "detect": {"mug_1"}, "occlude": False}])
+    track = next(iter(live.tracks.values()))
+    assert track.label == "mug"
+    relabeled = track.evolved(class_evidence={"cup": 3.0})
+    assert relabeled.label == "cup" and track.label == "mug"
+    assert relabeled.to_dict() == {**track.to_dict(), "class_evidence": {"cup": 3.0}}
+    with pytest.raises(TypeError, match="no field"):
+        track.evolved(colour="red")
