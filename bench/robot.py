@@ -13,8 +13,8 @@ import numpy as np
 from tqdm import tqdm
 
 from bench.sim.camera import CameraModel
-from bench.sim.demo import demo_script, demo_trajectory, demo_world, world_at
-from bench.sim.detector import detect
+from bench.sim.demo import DEMO_AMBIGUITY, demo_script, demo_trajectory, demo_world, world_at
+from bench.sim.detector import detect, detect_fixtures
 from bench.sim.render import add_kinect_noise, render
 from bench.sim.wire import make_batch, make_frame
 
@@ -25,6 +25,10 @@ DETECTOR_SETTINGS: dict[str, Any] = {
     "recall": 0.95,
     "embedding_noise": 0.05,
     "boundary_leak_px": 1,
+}
+FIXTURE_DETECTOR_SETTINGS: dict[str, Any] = {
+    "recall": 0.9,
+    "ambiguity": DEMO_AMBIGUITY,
 }
 
 
@@ -96,6 +100,7 @@ def simulate_frames(n_frames: int, seed: int) -> Iterator[dict[str, Any]]:
         world = world_at(frame_index, base, script)
         view = render(world, camera, pose)
         detections = detect(view, world, rng, **DETECTOR_SETTINGS)
+        detections += detect_fixtures(view, world, rng, **FIXTURE_DETECTOR_SETTINGS)
         depth = add_kinect_noise(view.depth, rng)
         yield make_frame(
             f"f{frame_index:06d}",

@@ -81,6 +81,48 @@ class TrackRemoved(Event):
     type: ClassVar[str] = "remove"
 
 
+@dataclass(frozen=True)
+class FixtureEvidence(Event):
+    """Class evidence of the batch's fixture masks, added to the scene's voxel map."""
+
+    type: ClassVar[str] = "fixture_evidence"
+
+
+@dataclass(frozen=True)
+class VerificationRequested(Event):
+    """A near-threshold or class-conflicting fixture waits for one bounded verification."""
+
+    type: ClassVar[str] = "verification_requested"
+
+
+@dataclass(frozen=True)
+class TrackVerified(Event):
+    """A verdict on a pending track: evidence weight 3, existence +1.8 or -2.2."""
+
+    type: ClassVar[str] = "verify"
+
+
+@dataclass(frozen=True)
+class BaselineFrozen(Event):
+    """The confirmed fixtures frozen as an immutable, versioned package; they become pinned."""
+
+    type: ClassVar[str] = "baseline_frozen"
+
+
+@dataclass(frozen=True)
+class BaselineLoaded(Event):
+    """A new session starts from a frozen baseline: its fixtures keep their identities."""
+
+    type: ClassVar[str] = "baseline_loaded"
+
+
+@dataclass(frozen=True)
+class InspectionRecorded(Event):
+    """One fixture-centered capture in the ledger: frames, outcome and attached children."""
+
+    type: ClassVar[str] = "inspection"
+
+
 EVENT_TYPES: dict[str, type[Event]] = {
     cls.type: cls
     for cls in (
@@ -92,6 +134,12 @@ EVENT_TYPES: dict[str, type[Event]] = {
         TrackReparented,
         TrackDemoted,
         TrackRemoved,
+        FixtureEvidence,
+        VerificationRequested,
+        TrackVerified,
+        BaselineFrozen,
+        BaselineLoaded,
+        InspectionRecorded,
     )
 }
 

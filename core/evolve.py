@@ -7,7 +7,11 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 from core.events import (
+    BaselineFrozen,
+    BaselineLoaded,
     Event,
+    FixtureEvidence,
+    InspectionRecorded,
     SceneCreated,
     TrackAdded,
     TrackConfirmed,
@@ -16,9 +20,11 @@ from core.events import (
     TrackRemoved,
     TrackReparented,
     TrackUpdated,
+    TrackVerified,
+    VerificationRequested,
 )
 from core.params import Params
-from core.state import SceneState, Track, Vec3
+from core.state import BaselineRecord, SceneState, Track, Vec3, VoxelKey
 
 
 def evolve(state: SceneState, event: Event) -> SceneState:
@@ -31,11 +37,37 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
     tracks = dict(state.tracks)
     params, name = state.params, state.name
     head_seq, next_track_number = state.head_seq, state.next_track_number
+    voxels: dict[VoxelKey, tuple[int, tuple[float, ...]]] | None = None  # copied on first use
+    baselines, source_baseline = list(state.baselines), state.source_baseline
     for event in events:
         head_seq += 1
         if isinstance(event, SceneCreated):
             params = Params.from_dict(event.details.get("params"))
             name = str(event.details.get("name", ""))
+            source_baseline = event.details.get("baseline")
+            continue
+        if isinstance(event, FixtureEvidence):
+            if voxels is None:
+                voxels = dict(state.voxels)
+            _add_voxel_evidence(voxels, event)
+            continue
+        if isinstance(event, BaselineFrozen):
+            fixture_ids = tuple(event.details["fixture_ids"])
+            baselines.append(
+                BaselineRecord(
+                    int(event.details["version"]),
+                    head_seq,
+                    str(event.details["sha256"]),
+                    fixture_ids,
+                )
+            )
+            for fixture_id in fixture_ids:
+                tracks[fixture_id] = tracks[fixture_id].evolved(pinned=True)
+            continue
+        if isinstance(event, BaselineLoaded):
+            for record in event.details["fixtures"]:
+                tracks[record["track_id"]] = Track.from_dict(record)
+            next_track_number = max(next_track_number, int(event.details["next_track_number"]))
             continue
         track_id = event.track_id
         if track_id is None:
@@ -56,6 +88,15 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
             tracks[track_id] = track.evolved(parent=event.details.get("new_parent"))
         elif isinstance(event, TrackDemoted | TrackRemoved):
             tracks[track_id] = track.evolved(lifecycle=str(event.state))
+        elif isinstance(event, VerificationRequested):
+            tracks[track_id] = track.evolved(verification="pending")
+        elif isinstance(event, TrackVerified):
+            tracks[track_id] = _apply_verdict(track, event, params)
+        elif isinstance(event, InspectionRecorded):
+            tracks[track_id] = track.evolved(
+                inspection_status=event.details.get("status"),
+                inspection_attempts=int(event.details["attempts"]),
+            )
         else:
             raise ValueError(f"no evolve rule for event type {event.type!r}")
     return SceneState(
@@ -64,6 +105,39 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
         head_seq=head_seq,
         tracks=tracks,
         next_track_number=next_track_number,
+        voxels=state.voxels if voxels is None else voxels,
+        baselines=tuple(baselines),
+        source_baseline=source_baseline,
+    )
+
+
+def _add_voxel_evidence(
+    voxels: dict[VoxelKey, tuple[int, tuple[float, ...]]], event: Event
+) -> None:
+    """Each fixture mask adds one count and its class similarities to every voxel it covers."""
+    for detection in event.details["detections"]:
+        scores = tuple(detection["class_scores"])
+        flat = detection["voxels"]
+        for i in range(0, len(flat), 3):
+            key = (flat[i], flat[i + 1], flat[i + 2])
+            count, totals = voxels.get(key) or (0, (0.0,) * len(scores))
+            voxels[key] = (count + 1, tuple(map(operator.add, totals, scores)))
+
+
+def _apply_verdict(track: Track, event: Event, params: Params) -> Track:
+    """A cached verification: evidence weight 3 for the verified label, existence from the event."""
+    details = event.details
+    class_evidence = dict(track.class_evidence)
+    label = details["label"]
+    class_evidence[label] = (
+        class_evidence.get(label, 0.0) + params.fusion.verification_evidence_weight
+    )
+    return track.evolved(
+        class_evidence=class_evidence,
+        existence_logodds=float(details["existence_logodds"]),
+        verification="confirmed" if details["verdict"] == "confirm" else "rejected",
+        verdict_frame=details.get("frame_id"),
+        lifecycle=str(event.state),
     )
 
 
@@ -117,12 +191,21 @@ def _observe(track: Track, event: Event, params: Params) -> Track:
             else tuple(map(operator.add, embedding_sum, batch_sum))
         )
     last = observations[-1]
+    extra: dict[str, Any] = {}
+    if "best_frame" in details:
+        extra.update(
+            best_frame=details["best_frame"], best_frame_support=int(details["best_frame_support"])
+        )
+    if "parent_evidence" in details:
+        parent_evidence = dict(details["parent_evidence"])
     return track.evolved(
+        **extra,
+        margin_sum=track.margin_sum + float(details.get("margin", 0.0)),
         lifecycle=str(event.state),
         class_evidence=class_evidence,
         parent_evidence=parent_evidence,
         existence_logodds=float(details["existence_logodds"]),
-        center=_vec3(last["center"]),
+        center=_vec3(details.get("center", last["center"])),
         extent=_vec3(last["extent"]),
         recent_centers=centers[-params.fusion.max_recent_centers :],
         embedding_sum=embedding_sum,

@@ -26,6 +26,7 @@ class Proposal:
     valid_pixels: int
     frame_id: str
     timestamp: float
+    bottom_z: float  # low percentile of the inlier heights: where the object rests
 
 
 def backproject_pixels(
@@ -146,6 +147,7 @@ def ground_detection(
         valid_pixels=int(inliers.sum()),
         frame_id=frame.frame_id,
         timestamp=frame.timestamp,
+        bottom_z=float(low[2]),
     )
 
 

@@ -7,6 +7,7 @@ were decided with.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
@@ -94,6 +95,66 @@ class LifecycleParams:
     remove_min_visible_misses: int = 3
 
 
+SizeLimits = tuple[float, float, float, float, float, float]  # min dx, dy, dz then max dx, dy, dz
+
+
+@dataclass(frozen=True)
+class FixtureParams:
+    """Coarse fixtures: voxel class evidence, DBSCAN, association and promotion (sections 3.2, 3.3).
+
+    The paper gives the structure and reports its exact fixture gates in its supplementary
+    material, which we do not have; the numbers here are ours, chosen for indoor furniture.
+    """
+
+    taxonomy: tuple[str, ...] = ("table", "desk", "counter", "bed", "shelf", "cabinet", "sofa")
+    # Only these classes enter the inspection queue Q_t (section 3.4, T_insp).
+    inspection_taxonomy: tuple[str, ...] = ("table", "desk", "counter", "shelf")
+    voxel_size_m: float = 0.05
+    # A voxel is kept for class c when its mean similarity to c reaches the threshold of c and
+    # beats every competing class by the margin.
+    default_class_threshold: float = 0.40
+    class_thresholds: dict[str, float] = field(default_factory=dict)
+    min_class_margin: float = 0.02
+    # DBSCAN in metric space over kept voxel centres (eps spans the 26-neighbourhood).
+    dbscan_eps_m: float = 0.09
+    dbscan_min_points: int = 4
+    # Plausible sizes per class: min dx, dy, dz, max dx, dy, dz (dx >= dy: footprint sorted).
+    default_size_limits: SizeLimits = (0.25, 0.20, 0.10, 4.0, 2.5, 2.5)
+    size_limits: dict[str, SizeLimits] = field(
+        default_factory=lambda: {
+            "table": (0.4, 0.3, 0.3, 3.5, 2.0, 1.2),
+            "desk": (0.5, 0.3, 0.4, 3.0, 1.5, 1.2),
+            "counter": (0.5, 0.3, 0.5, 5.0, 1.5, 1.3),
+            "bed": (1.2, 0.7, 0.2, 2.6, 2.4, 1.2),
+        }
+    )
+    # Association: same class, planar center distance, expanded-footprint coverage or IoU.
+    max_planar_distance_m: float = 1.0
+    footprint_expand_m: float = 0.25
+    min_expanded_coverage: float = 0.6
+    min_footprint_iou: float = 0.25
+    # A residual cluster this much inside a matched fixture's expanded footprint is absorbed.
+    residual_containment: float = 0.9
+    # Promotion: support from several temporally distinct batches, then the consensus gate.
+    confirm_min_batches: int = 3
+    consensus_min_agreement: float = 0.8  # share of supporting batches whose top class agrees
+    consensus_min_margin: float = 0.08  # mean top-vs-second margin of those batches
+    # Support: an object rests on a fixture when its bottom is this close to the fixture top
+    # and its center is inside the fixture footprint grown by the margin.
+    support_height_tolerance_m: float = 0.08
+    support_footprint_margin_m: float = 0.05
+
+
+@dataclass(frozen=True)
+class InspectionParams:
+    """Fixture-centered inspection capture (sections 3.2 and 3.4)."""
+
+    max_attempts: int = 3  # bounded retry: a fixture failing this often is abandoned
+    min_support_samples: int = 2  # support-region samples that must pass the visibility gate
+    nms_mask_iou: float = 0.5  # same-class non-maximum suppression
+    cross_class_mask_iou: float = 0.7  # cross-class overlap suppression
+
+
 @dataclass(frozen=True)
 class Params:
     """The whole parameter tree of one scene."""
@@ -104,6 +165,8 @@ class Params:
     visibility: VisibilityParams = field(default_factory=VisibilityParams)
     fusion: FusionParams = field(default_factory=FusionParams)
     lifecycle: LifecycleParams = field(default_factory=LifecycleParams)
+    fixtures: FixtureParams = field(default_factory=FixtureParams)
+    inspection: InspectionParams = field(default_factory=InspectionParams)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able dict (tuples become lists)."""
@@ -136,6 +199,14 @@ def _merge(node: Any, overrides: dict[str, Any], path: str) -> Any:
         current = getattr(node, key)
         if is_dataclass(current):
             changes[key] = _merge(current, value, f"{path}.{key}")
+        elif isinstance(current, dict):
+            changes[key] = _merge_map(current, value, f"{path}.{key}", known[key].type)
+        elif isinstance(current, tuple) and all(isinstance(item, str) for item in current):
+            if not isinstance(value, list | tuple) or not all(
+                isinstance(i, str) and i for i in value
+            ):
+                raise ValueError(f"{path}.{key}: expected a list of non-empty strings")
+            changes[key] = tuple(value)
         elif isinstance(current, tuple):
             if not isinstance(value, list | tuple) or len(value) != len(current):
                 raise ValueError(f"{path}.{key}: expected a list of {len(current)} numbers")
@@ -145,6 +216,24 @@ def _merge(node: Any, overrides: dict[str, Any], path: str) -> Any:
         else:
             changes[key] = _coerce(value, current, f"{path}.{key}")
     return replace(node, **changes)
+
+
+def _merge_map(current: dict[str, Any], value: Any, path: str, annotation: Any) -> dict[str, Any]:
+    """A per-class map: replaced key by key; numbers or fixed-length number lists as values."""
+    if not isinstance(value, dict):
+        raise ValueError(f"{path}: expected an object")
+    merged = dict(current)
+    tuple_values = "SizeLimits" in str(annotation)
+    for name, item in value.items():
+        if not isinstance(name, str) or not name:
+            raise ValueError(f"{path}: keys must be non-empty strings")
+        if tuple_values:
+            if not isinstance(item, list | tuple) or len(item) != 6:
+                raise ValueError(f"{path}.{name}: expected a list of 6 numbers")
+            merged[name] = tuple(_coerce(v, 0.0, f"{path}.{name}") for v in item)
+        else:
+            merged[name] = _coerce(item, 0.0, f"{path}.{name}")
+    return merged
 
 
 def _coerce(value: Any, like: Any, path: str) -> Any:
@@ -157,8 +246,12 @@ def _coerce(value: Any, like: Any, path: str) -> Any:
             raise ValueError(f"{path}: expected an integer")
         return value
     if isinstance(like, float):
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(f"{path}: expected a number")
+        if (
+            isinstance(value, bool)
+            or not isinstance(value, int | float)
+            or not math.isfinite(value)
+        ):
+            raise ValueError(f"{path}: expected a finite number")
         return float(value)
     return value
 

@@ -14,7 +14,8 @@ import numpy.typing as npt
 from core.params import Params
 
 Vec3 = tuple[float, float, float]
-SNAPSHOT_FORMAT_VERSION = 1
+SNAPSHOT_FORMAT_VERSION = 2
+VoxelKey = tuple[int, int, int]
 
 
 def logistic(logodds: float) -> float:
@@ -43,6 +44,14 @@ class Track:
     batches_observed: int = 0  # distinct positive batches since (re)acquisition
     visible_misses: int = 0  # visibility-admissible misses since the last positive batch
     published_center: Vec3 | None = None  # where the graph last said the track is
+    pinned: bool = False  # a fixture of a frozen baseline: exempt from dynamic removal
+    verification: str | None = None  # pending | confirmed | rejected (coarse-stage verification)
+    verdict_frame: str | None = None  # the observation the last verdict was about
+    margin_sum: float = 0.0  # fixtures: summed top-vs-second class margin of supporting batches
+    best_frame: str | None = None  # fixtures: the frame that contributed most evidence (to crop)
+    best_frame_support: int = 0
+    inspection_status: str | None = None  # fixtures: completed | abandoned
+    inspection_attempts: int = 0  # failed captures so far
 
     def evolved(self, **changes: Any) -> Track:
         """A copy with `changes` (what dataclasses.replace does, without its per-field cost).
@@ -116,6 +125,14 @@ class Track:
             "published_center": None
             if self.published_center is None
             else list(self.published_center),
+            "pinned": self.pinned,
+            "verification": self.verification,
+            "verdict_frame": self.verdict_frame,
+            "margin_sum": self.margin_sum,
+            "best_frame": self.best_frame,
+            "best_frame_support": self.best_frame_support,
+            "inspection_status": self.inspection_status,
+            "inspection_attempts": self.inspection_attempts,
         }
 
     @classmethod
@@ -141,6 +158,14 @@ class Track:
             batches_observed=int(record["batches_observed"]),
             visible_misses=int(record["visible_misses"]),
             published_center=None if published is None else _vec3(published),
+            pinned=bool(record["pinned"]),
+            verification=record["verification"],
+            verdict_frame=record["verdict_frame"],
+            margin_sum=float(record["margin_sum"]),
+            best_frame=record["best_frame"],
+            best_frame_support=int(record["best_frame_support"]),
+            inspection_status=record["inspection_status"],
+            inspection_attempts=int(record["inspection_attempts"]),
         )
 
 
@@ -162,6 +187,16 @@ class TrackArrays:
 
 
 @dataclass(frozen=True)
+class BaselineRecord:
+    """A frozen baseline of this scene: version, the seq it was frozen at, its fixtures, sha256."""
+
+    version: int
+    seq: int
+    sha256: str
+    fixture_ids: tuple[str, ...]
+
+
+@dataclass(frozen=True)
 class SceneState:
     """M_t: the persistent track table, plus what the log says about the scene itself."""
 
@@ -170,6 +205,11 @@ class SceneState:
     head_seq: int = -1  # seq of the last event folded in; scene_created is seq 0
     tracks: Mapping[str, Track] = field(default_factory=dict)
     next_track_number: int = 1
+    # The fixture voxel map: per voxel, how many fixture masks covered it and the summed class
+    # similarities, in the order of params.fixtures.taxonomy.
+    voxels: Mapping[VoxelKey, tuple[int, tuple[float, ...]]] = field(default_factory=dict)
+    baselines: tuple[BaselineRecord, ...] = ()
+    source_baseline: Mapping[str, Any] | None = None  # the package this session started from
 
     @cached_property
     def arrays(self) -> TrackArrays:
@@ -191,6 +231,19 @@ class SceneState:
             "head_seq": self.head_seq,
             "next_track_number": self.next_track_number,
             "tracks": [self.tracks[i].to_dict() for i in sorted(self.tracks)],
+            "voxels": [
+                [*key, count, list(scores)] for key, (count, scores) in sorted(self.voxels.items())
+            ],
+            "baselines": [
+                {
+                    "version": b.version,
+                    "seq": b.seq,
+                    "sha256": b.sha256,
+                    "fixture_ids": list(b.fixture_ids),
+                }
+                for b in self.baselines
+            ],
+            "source_baseline": self.source_baseline,
         }
 
     @classmethod
@@ -205,4 +258,10 @@ class SceneState:
             head_seq=int(record["head_seq"]),
             tracks=tracks,
             next_track_number=int(record["next_track_number"]),
+            voxels={(v[0], v[1], v[2]): (int(v[3]), tuple(v[4])) for v in record["voxels"]},
+            baselines=tuple(
+                BaselineRecord(b["version"], b["seq"], b["sha256"], tuple(b["fixture_ids"]))
+                for b in record["baselines"]
+            ),
+            source_baseline=record["source_baseline"],
         )

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,6 +13,13 @@ from bench.sim.world import Box, World, object_on
 
 TABLE = Box("table", "table", (3.0, 2.3, 0.375), (1.2, 0.8, 0.75), kind="fixture")
 COUNTER = Box("counter", "counter", (3.0, 4.6, 0.45), (2.0, 0.6, 0.9), kind="fixture")
+# Against the east wall's south end, 0.3 m clear of the camera loop; the table-facing views from
+# the loop's north and west sides (frames 1-11 and 24-35 of 120) see it, the first few partly.
+DESK = Box("desk", "desk", (5.65, 1.0, 0.375), (0.6, 1.2, 0.75), kind="fixture")
+
+# Fixture id -> class scores replacing the detector's defaults: the desk reads almost as well as
+# a table, so the demo shows a fixture waiting for verification; table and counter stay clear.
+DEMO_AMBIGUITY: Mapping[str, Mapping[str, float]] = {DESK.id: {"desk": 0.50, "table": 0.47}}
 
 MUG_SIZE = (0.08, 0.08, 0.10)
 BOOK_SIZE = (0.20, 0.15, 0.04)
@@ -27,14 +34,14 @@ TARGET_BLOCKS = 10  # the gaze alternates table/counter this many times per loop
 
 
 def demo_world() -> World:
-    """A 6 x 5 x 2.6 m room with a table and a counter carrying a mug, book, bowl and bottle."""
+    """A 6 x 5 x 2.6 m room: a mug, book, bowl and bottle on a table and counter; a bare desk."""
     objects = (
         object_on(TABLE, "mug", "mug", MUG_SIZE, at=(-0.4, -0.2)),
         object_on(TABLE, "book", "book", BOOK_SIZE, at=(0.35, 0.15), yaw=0.3),
         object_on(TABLE, "bowl", "bowl", BOWL_SIZE, at=(-0.1, 0.2)),
         object_on(COUNTER, "bottle", "bottle", BOTTLE_SIZE, at=(-0.5, 0.05)),
     )
-    return World(room_size=(6.0, 5.0, 2.6), fixtures=(TABLE, COUNTER), objects=objects)
+    return World(room_size=(6.0, 5.0, 2.6), fixtures=(TABLE, COUNTER, DESK), objects=objects)
 
 
 def gaze_target(frame_index: int, n_frames: int) -> tuple[float, float, float]:

@@ -57,6 +57,10 @@ def encode_detection(detection: SimDetection) -> dict[str, Any]:
     }
     if detection.embedding is not None:
         encoded["embedding"] = [float(component) for component in detection.embedding]
+    if detection.class_scores is not None:
+        encoded["class_scores"] = {
+            str(label): float(score) for label, score in detection.class_scores.items()
+        }
     return encoded
 
 

@@ -8,31 +8,64 @@ import numpy as np
 import pytest
 
 from bench.sim.camera import CameraModel
-from bench.sim.demo import COUNTER, TABLE, demo_script, demo_trajectory, demo_world, world_at
+from bench.sim.demo import (
+    COUNTER,
+    DEMO_AMBIGUITY,
+    DESK,
+    TABLE,
+    demo_script,
+    demo_trajectory,
+    demo_world,
+    world_at,
+)
 from bench.sim.render import render
 
 N_FRAMES = 120
-MIN_PIXELS = 150
+MIN_PIXELS = 150  # the robot's object detector threshold
+MIN_FIXTURE_PIXELS = 400  # the fixture detector's default threshold
 
 
 @pytest.fixture(scope="module")
 def sightings() -> dict[str, list[int]]:
-    """For each object id, the frames in which at least MIN_PIXELS of it are visible."""
+    """For each object or fixture id, the frames in which enough of it is visible to detect."""
     base, script = demo_world(), demo_script(N_FRAMES)
     seen: dict[str, list[int]] = defaultdict(list)
     for frame_index, pose in enumerate(demo_trajectory(N_FRAMES)):
         world = world_at(frame_index, base, script)
         view = render(world, CameraModel(), pose)
-        counts = np.bincount(view.instance.ravel() + 1, minlength=len(world.objects) + 1)[1:]
-        for box, count in zip(world.objects, counts, strict=True):
-            if count >= MIN_PIXELS:
-                seen[box.id].append(frame_index)
+        for boxes, instance, threshold in (
+            (world.objects, view.instance, MIN_PIXELS),
+            (world.fixtures, view.fixture_instance, MIN_FIXTURE_PIXELS),
+        ):
+            counts = np.bincount(instance.ravel() + 1, minlength=len(boxes) + 1)[1:]
+            for box, count in zip(boxes, counts, strict=True):
+                if count >= threshold:
+                    seen[box.id].append(frame_index)
     return dict(seen)
 
 
 def test_every_object_is_seen_in_at_least_three_frames(sightings: dict[str, list[int]]) -> None:
     for object_id in ("mug", "book", "bowl", "bottle"):
         assert len(sightings.get(object_id, [])) >= 3, object_id
+
+
+def test_every_fixture_is_seen_and_the_desk_on_two_passes(
+    sightings: dict[str, list[int]],
+) -> None:
+    assert [box.id for box in demo_world().fixtures] == ["table", "counter", "desk"]
+    assert len(sightings["table"]) >= 60 and len(sightings["counter"]) >= 60
+    desk_frames = sightings["desk"]
+    assert len(desk_frames) >= 10
+    # Two separate passes, so the desk's evidence arrives across batches, not in one burst.
+    assert max(desk_frames) - min(desk_frames) >= 20
+
+
+def test_only_the_desk_is_ambiguous() -> None:
+    assert set(DEMO_AMBIGUITY) == {DESK.id}
+    desk_scores = DEMO_AMBIGUITY[DESK.id]
+    ranked = sorted(desk_scores, key=desk_scores.get, reverse=True)
+    assert ranked[:2] == ["desk", "table"]
+    assert 0 < desk_scores["desk"] - desk_scores["table"] <= 0.05
 
 
 def test_changed_objects_are_seen_after_each_change(sightings: dict[str, list[int]]) -> None:
@@ -68,6 +101,12 @@ def test_trajectory_stays_in_the_room_at_head_height() -> None:
     for pose in poses:
         rotation = pose[:3, :3]
         assert np.allclose(rotation.T @ rotation, np.eye(3)) and np.linalg.det(rotation) > 0
+    # The walk keeps 0.3 m clear of the desk's footprint (it is against the east wall).
+    half_x, half_y = DESK.size[0] / 2, DESK.size[1] / 2
+    outside_x = np.maximum(np.abs(eyes[:, 0] - DESK.center[0]) - half_x, 0.0)
+    outside_y = np.maximum(np.abs(eyes[:, 1] - DESK.center[1]) - half_y, 0.0)
+    assert np.hypot(outside_x, outside_y).min() >= 0.3
+    assert 0 < room[0] - (DESK.center[0] + half_x) <= 0.1
     # The gaze alternates: some frames look at the table, others at the counter.
     forward_y = np.array([pose[1, 2] for pose in poses])
     assert (forward_y > 0.5).any() and (forward_y < -0.5).any()

@@ -12,6 +12,8 @@ import pytest
 from PIL import Image
 
 import bench.robot as robot
+from api_schema import BatchIn
+from bench.sim.detector import FIXTURE_VOCABULARY
 
 SCENE_ID = "scene-42"
 
@@ -63,9 +65,21 @@ def test_run_creates_a_scene_and_posts_every_frame_in_batches() -> None:
     assert depth.shape == (480, 640) and (depth > 0).mean() > 0.9
     assert np.array(first["pose"]).shape == (4, 4)
     detections = [detection for frame in frames for detection in frame["detections"]]
-    assert detections, "the demo start looks at the table, so something must be detected"
-    assert {detection["label"] for detection in detections} <= {"mug", "book", "bowl", "bottle"}
-    assert all(len(detection["embedding"]) == 64 for detection in detections)
+    objects = [detection for detection in detections if detection["kind"] == "object"]
+    fixtures = [detection for detection in detections if detection["kind"] == "fixture"]
+    assert objects, "the demo start looks at the table, so something must be detected"
+    assert len(objects) + len(fixtures) == len(detections)
+    assert {detection["label"] for detection in objects} <= {"mug", "book", "bowl", "bottle"}
+    assert all(len(detection["embedding"]) == 64 for detection in objects)
+    assert {"table", "counter"} <= {detection["label"] for detection in fixtures}
+    for fixture in fixtures:
+        assert "embedding" not in fixture and set(fixture["class_scores"]) <= set(
+            FIXTURE_VOCABULARY
+        )
+        assert fixture["score"] == max(fixture["class_scores"].values())
+        assert fixture["label"] == max(fixture["class_scores"], key=fixture["class_scores"].get)
+    for batch in service.batches:
+        BatchIn.model_validate(batch)  # what the service would accept, class_scores included
 
 
 def test_same_seed_sends_identical_batches() -> None:

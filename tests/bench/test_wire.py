@@ -16,6 +16,7 @@ from bench.sim.detector import SimDetection
 from bench.sim.wire import (
     encode_depth_f32,
     encode_depth_png16,
+    encode_detection,
     encode_mask,
     make_batch,
     make_frame,
@@ -101,7 +102,7 @@ def test_make_batch_is_json_with_the_wire_fields() -> None:
         "mask": encode_mask(mask),
         "embedding": [0.1, 0.2],
     }
-    assert "embedding" not in second
+    assert "embedding" not in second and "class_scores" not in second
     assert "object_id" not in first  # ground truth must not leak to the service
 
 
@@ -109,3 +110,16 @@ def test_make_frame_can_send_float_depth() -> None:
     camera = CameraModel(width=64, height=48)
     frame = make_frame("f1", 0.0, camera, np.eye(4), sample_depth(), [], depth_encoding="f32")
     assert frame["depth"]["encoding"] == "f32" and frame["detections"] == []
+
+
+def test_fixture_detection_sends_kind_and_class_scores() -> None:
+    mask = np.zeros((48, 64), dtype=bool)
+    mask[20:40, 10:50] = True
+    # numpy scalars must come out as plain floats, or json.dumps refuses them.
+    class_scores = {"desk": np.float64(0.51), "table": np.float32(0.49)}
+    desk = SimDetection("desk-1", "desk", 0.51, mask, None, "fixture", class_scores)
+    encoded = json.loads(json.dumps(encode_detection(desk)))
+    assert encoded["kind"] == "fixture" and encoded["label"] == "desk"
+    assert encoded["class_scores"] == pytest.approx({"desk": 0.51, "table": 0.49})
+    assert list(encoded["class_scores"]) == ["desk", "table"]
+    assert "embedding" not in encoded and "desk-1" not in json.dumps(encoded)

@@ -51,7 +51,10 @@ def test_round_trip_and_partial_override():
             {"lifecycle": {"confirm_min_batches": 2.5}},
             "params.lifecycle.confirm_min_batches: expected an integer",
         ),
-        ({"existence": {"eta_missed": "a lot"}}, "params.existence.eta_missed: expected a number"),
+        (
+            {"existence": {"eta_missed": "a lot"}},
+            "params.existence.eta_missed: expected a finite number",
+        ),
         ({"proposal": {"extent_percentiles": [5]}}, "expected a list of 2 numbers"),
     ],
 )

@@ -1,0 +1,87 @@
+"""One batch of fixture masks: voxel evidence, query, DBSCAN, association (sections 3.2, 3.3)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from core.events import FixtureEvidence
+from core.fixtures import (
+    FixtureProposal,
+    FixtureTrackView,
+    associate_fixtures,
+    fixture_proposals,
+    kept_voxels,
+    merged_voxels,
+    voxel_evidence,
+)
+from core.observation import Batch
+from core.params import Params
+from core.state import SceneState
+
+
+@dataclass
+class FixtureBatch:
+    """What the batch's fixture masks say: new evidence, and per track the proposal it explains."""
+
+    evidence_event: FixtureEvidence | None = None
+    observed: dict[str, FixtureProposal] = field(default_factory=dict)  # track id -> proposal
+    unexplained: list[FixtureProposal] = field(default_factory=list)  # new hypotheses
+
+
+def fixture_batch(state: SceneState, batch: Batch, params: Params) -> FixtureBatch:
+    """Add the batch's fixture evidence to the voxel map, cluster it and associate the clusters."""
+    fixture_params = params.fixtures
+    evidence = [
+        item
+        for frame in batch.frames
+        for detection in frame.detections
+        if detection.kind == "fixture"
+        and (
+            item := voxel_evidence(
+                detection,
+                frame,
+                fixture_params,
+                params.visibility.min_range_m,
+                params.visibility.max_range_m,
+            )
+        )
+        is not None
+    ]
+    result = FixtureBatch()
+    if not evidence:
+        return result
+    result.evidence_event = FixtureEvidence(
+        None,
+        None,
+        None,
+        {
+            "detections": [
+                {
+                    "frame_id": e.frame_id,
+                    "class_scores": list(e.class_scores),
+                    "voxels": e.voxels.ravel().tolist(),
+                }
+                for e in evidence
+            ]
+        },
+    )
+    # Query the whole accumulated map against the taxonomy, then cluster each class.
+    keys, counts, sums, covered = merged_voxels(state.voxels, evidence)
+    kept, scores, margins = kept_voxels(counts, sums, fixture_params)
+    proposals = fixture_proposals(
+        keys, counts, sums, kept, scores, margins, covered, fixture_params
+    )
+    tracks = [
+        FixtureTrackView(t.track_id, t.label, t.center, t.extent)
+        for t in (state.tracks[i] for i in sorted(state.tracks))
+        if t.kind == "fixture"
+    ]
+    matches, absorbed = associate_fixtures(proposals, tracks, fixture_params)
+    for j, proposal in enumerate(proposals):
+        track_id = matches.get(j)
+        if track_id is not None:
+            if proposal.contributed > 0:  # positive evidence only from what this batch saw
+                result.observed[track_id] = proposal
+        elif j not in absorbed and proposal.contributed > 0:
+            result.unexplained.append(proposal)
+    return result

@@ -1,0 +1,318 @@
+"""Coarse fixtures: voxel class evidence, taxonomy query, DBSCAN, proposals, association.
+
+Section 3.2 ("the accumulated voxel map is queried against the fixture taxonomy ... clustered
+by DBSCAN ... implausible clusters are discarded") and section 3.3 ("same-class planar
+proximity, expanded-footprint coverage, and footprint IoU"; a strictly contained residual
+cluster attaches to an already matched fixture).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import numpy.typing as npt
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from core.geometry import backproject_pixels, camera_to_world
+from core.observation import Detection, Frame
+from core.params import FixtureParams
+from core.state import VoxelKey
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+Footprint = tuple[float, float, float, float]  # xmin, ymin, xmax, ymax
+
+
+@dataclass(frozen=True)
+class VoxelEvidence:
+    """One fixture mask's contribution: the voxels it covers and its class similarities."""
+
+    frame_id: str
+    class_scores: tuple[float, ...]  # in taxonomy order
+    voxels: IntArray  # (n, 3) unique voxel keys
+
+
+@dataclass(frozen=True, eq=False)
+class FixtureProposal:
+    """A plausible same-class cluster of kept voxels."""
+
+    label: str
+    center: FloatArray  # (3,)
+    extent: FloatArray  # (3,)
+    voxel_count: int
+    margin: float  # mean top-vs-second class margin over the cluster
+    mean_score: float
+    contributed: int  # voxels of this cluster covered by the current batch
+    best_frame: str | None  # the batch frame that covered most of it
+    class_means: dict[str, float] = field(default_factory=dict)  # mean similarity per class
+
+    @property
+    def footprint(self) -> Footprint:
+        """Planar box of the cluster."""
+        half = self.extent / 2
+        return (
+            float(self.center[0] - half[0]),
+            float(self.center[1] - half[1]),
+            float(self.center[0] + half[0]),
+            float(self.center[1] + half[1]),
+        )
+
+
+def class_vector(detection: Detection, taxonomy: Sequence[str]) -> tuple[float, ...]:
+    """The detection's similarity to each taxonomy class (its label alone when no map is given)."""
+    scores = detection.class_scores or {detection.label: detection.score}
+    return tuple(float(scores.get(name, 0.0)) for name in taxonomy)
+
+
+def voxel_evidence(
+    detection: Detection,
+    frame: Frame,
+    params: FixtureParams,
+    min_range_m: float,
+    max_range_m: float,
+) -> VoxelEvidence | None:
+    """Back-project a fixture mask's valid depth into unique voxel keys."""
+    flat_index = np.flatnonzero(detection.mask)
+    depth_m = frame.depth.reshape(-1)[flat_index].astype(np.float64)
+    valid = (depth_m >= min_range_m) & (depth_m <= max_range_m)
+    if not valid.any():
+        return None
+    points = camera_to_world(
+        backproject_pixels(flat_index[valid], depth_m[valid], frame.intrinsics), frame.pose
+    )
+    keys = np.unique(np.floor(points / params.voxel_size_m).astype(np.int64), axis=0)
+    return VoxelEvidence(frame.frame_id, class_vector(detection, params.taxonomy), keys)
+
+
+def merged_voxels(
+    voxels: Mapping[VoxelKey, tuple[int, tuple[float, ...]]], batch: Sequence[VoxelEvidence]
+) -> tuple[IntArray, IntArray, FloatArray, dict[VoxelKey, dict[str, int]]]:
+    """Arrays (keys, counts, score sums) of the map with the batch's evidence added.
+
+    Also returns, per voxel the batch covered, how many of its voxels each frame covered.
+    """
+    updated: dict[VoxelKey, tuple[int, tuple[float, ...]]] = {}
+    covered: dict[VoxelKey, dict[str, int]] = {}
+    for evidence in batch:
+        scores = evidence.class_scores
+        for key in map(tuple, evidence.voxels.tolist()):
+            count, totals = updated.get(key) or voxels.get(key) or (0, (0.0,) * len(scores))
+            updated[key] = (count + 1, tuple(a + b for a, b in zip(totals, scores, strict=True)))
+            frames = covered.setdefault(key, {})
+            frames[evidence.frame_id] = frames.get(evidence.frame_id, 0) + 1
+    merged = {**voxels, **updated}
+    if not merged:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros((0, 0)), covered
+    keys = np.array(list(merged.keys()), dtype=np.int64)
+    counts = np.array([value[0] for value in merged.values()], dtype=np.int64)
+    sums = np.array([value[1] for value in merged.values()], dtype=np.float64)
+    return keys, counts, sums, covered
+
+
+def kept_voxels(
+    counts: IntArray, sums: FloatArray, params: FixtureParams
+) -> tuple[IntArray, FloatArray, FloatArray]:
+    """Per voxel: the kept class index (-1 when dropped), its mean score and its margin."""
+    if counts.size == 0:
+        return np.zeros(0, np.int64), np.zeros(0), np.zeros(0)
+    means = sums / counts[:, None]
+    order = np.argsort(-means, axis=1, kind="stable")
+    best = order[:, 0]
+    best_score = np.take_along_axis(means, best[:, None], axis=1)[:, 0]
+    second_score = (
+        np.take_along_axis(means, order[:, 1:2], axis=1)[:, 0]
+        if means.shape[1] > 1
+        else np.zeros(len(best))
+    )
+    thresholds = np.array(
+        [
+            params.class_thresholds.get(name, params.default_class_threshold)
+            for name in params.taxonomy
+        ]
+    )
+    margin = best_score - second_score
+    keep = (best_score >= thresholds[best]) & (margin >= params.min_class_margin)
+    return np.where(keep, best, -1), best_score, margin
+
+
+def dbscan(points: FloatArray, eps: float, min_points: int) -> IntArray:
+    """DBSCAN cluster label per point (-1 for noise): core points joined within eps, borders attached."""
+    count = len(points)
+    labels = np.full(count, -1, dtype=np.int64)
+    if count == 0:
+        return labels
+    tree = cKDTree(points)
+    pairs = tree.query_pairs(eps, output_type="ndarray")
+    degree = np.bincount(pairs.ravel(), minlength=count) + 1  # a point is its own neighbour
+    core = degree >= min_points
+    core_pairs = pairs[core[pairs[:, 0]] & core[pairs[:, 1]]]
+    graph = coo_matrix(
+        (np.ones(len(core_pairs)), (core_pairs[:, 0], core_pairs[:, 1])), shape=(count, count)
+    )
+    _, component = connected_components(graph, directed=False)
+    labels[core] = component[core]
+    # Border points join the cluster of a core neighbour (the lowest index, for determinism).
+    for a, b in pairs[core[pairs[:, 0]] ^ core[pairs[:, 1]]]:
+        border, anchor = (b, a) if core[a] else (a, b)
+        if labels[border] == -1 or labels[anchor] < labels[border]:
+            labels[border] = labels[anchor]
+    return labels
+
+
+def fixture_proposals(
+    keys: IntArray,
+    counts: IntArray,
+    sums: FloatArray,
+    kept: IntArray,
+    scores: FloatArray,
+    margins: FloatArray,
+    covered: Mapping[VoxelKey, Mapping[str, int]],
+    params: FixtureParams,
+) -> list[FixtureProposal]:
+    """Same-class DBSCAN clusters of kept voxels that pass the class's size limits."""
+    proposals: list[FixtureProposal] = []
+    size = params.voxel_size_m
+    for class_index, label in enumerate(params.taxonomy):
+        members = np.flatnonzero(kept == class_index)
+        if members.size == 0:
+            continue
+        centers = ((keys[members] + 0.5) * size).astype(np.float64)
+        cluster_of = dbscan(centers, params.dbscan_eps_m, params.dbscan_min_points)
+        for cluster in np.unique(cluster_of[cluster_of >= 0]):
+            inside = members[cluster_of == cluster]
+            points = (keys[inside] + 0.5) * size
+            low, high = points.min(axis=0) - size / 2, points.max(axis=0) + size / 2
+            extent = high - low
+            if not plausible(label, extent, params):
+                continue
+            frames: dict[str, int] = {}
+            for key in map(tuple, keys[inside].tolist()):
+                for frame_id, n in covered.get(key, {}).items():
+                    frames[frame_id] = frames.get(frame_id, 0) + n
+            best_frame = (
+                min(frames.items(), key=lambda item: (-item[1], item[0]))[0] if frames else None
+            )
+            means = sums[inside].sum(axis=0) / counts[inside].sum()
+            proposals.append(
+                FixtureProposal(
+                    label=label,
+                    center=(low + high) / 2,
+                    extent=extent,
+                    voxel_count=int(inside.size),
+                    margin=float(margins[inside].mean()),
+                    mean_score=float(scores[inside].mean()),
+                    contributed=int(
+                        sum(1 for key in map(tuple, keys[inside].tolist()) if key in covered)
+                    ),
+                    best_frame=best_frame,
+                    class_means={
+                        name: float(value)
+                        for name, value in zip(params.taxonomy, means, strict=True)
+                        if value > 0
+                    },
+                )
+            )
+    return proposals
+
+
+def plausible(label: str, extent: FloatArray, params: FixtureParams) -> bool:
+    """Class-specific size limits on the sorted footprint and the height."""
+    limits = params.size_limits.get(label, params.default_size_limits)
+    footprint = sorted((float(extent[0]), float(extent[1])), reverse=True)
+    dims = (footprint[0], footprint[1], float(extent[2]))
+    return all(limits[i] <= dims[i] <= limits[i + 3] for i in range(3))
+
+
+def footprint_of(center: Sequence[float], extent: Sequence[float], grow: float = 0.0) -> Footprint:
+    """Planar box of a stored fixture, grown by `grow` on every side."""
+    return (
+        center[0] - extent[0] / 2 - grow,
+        center[1] - extent[1] / 2 - grow,
+        center[0] + extent[0] / 2 + grow,
+        center[1] + extent[1] / 2 + grow,
+    )
+
+
+def overlap_area(a: Footprint, b: Footprint) -> float:
+    """Area of the intersection of two planar boxes."""
+    width = min(a[2], b[2]) - max(a[0], b[0])
+    height = min(a[3], b[3]) - max(a[1], b[1])
+    return max(0.0, width) * max(0.0, height)
+
+
+def area(box: Footprint) -> float:
+    """Area of a planar box."""
+    return max(0.0, box[2] - box[0]) * max(0.0, box[3] - box[1])
+
+
+@dataclass(frozen=True)
+class FixtureTrackView:
+    """What fixture association needs of a track."""
+
+    track_id: str
+    label: str
+    center: tuple[float, float, float]
+    extent: tuple[float, float, float]
+
+
+def associate_fixtures(
+    proposals: Sequence[FixtureProposal], tracks: Sequence[FixtureTrackView], params: FixtureParams
+) -> tuple[dict[int, str], dict[int, str]]:
+    """(matches, absorbed): proposal index -> track id, greedy by planar distance.
+
+    A pair is eligible with the same class, planar distance under the gate, and either the
+    proposal mostly inside the track's expanded footprint or enough footprint IoU. A residual
+    proposal strictly contained in an already matched track is absorbed by it.
+    """
+    pairs: list[tuple[float, str, int]] = []
+    for j, proposal in enumerate(proposals):
+        box = proposal.footprint
+        for track in tracks:
+            if track.label != proposal.label:
+                continue
+            distance = float(
+                np.hypot(track.center[0] - proposal.center[0], track.center[1] - proposal.center[1])
+            )
+            if distance >= params.max_planar_distance_m:
+                continue
+            stored = footprint_of(track.center, track.extent)
+            grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
+            coverage = overlap_area(box, grown) / max(area(box), 1e-9)
+            union = area(box) + area(stored) - overlap_area(box, stored)
+            iou = overlap_area(box, stored) / max(union, 1e-9)
+            if coverage >= params.min_expanded_coverage or iou >= params.min_footprint_iou:
+                pairs.append((distance, track.track_id, j))
+    matches: dict[int, str] = {}
+    used: set[str] = set()
+    for _distance, track_id, j in sorted(pairs):
+        if j in matches or track_id in used:
+            continue
+        matches[j] = track_id
+        used.add(track_id)
+    absorbed: dict[int, str] = {}
+    by_id = {track.track_id: track for track in tracks}
+    for j, proposal in enumerate(proposals):
+        if j in matches:
+            continue
+        box = proposal.footprint
+        for track_id in sorted(used):
+            track = by_id[track_id]
+            grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
+            if track.label == proposal.label and overlap_area(
+                box, grown
+            ) >= params.residual_containment * area(box):
+                absorbed[j] = track_id
+                break
+    return matches, absorbed
+
+
+def ema_center(
+    previous: Sequence[float], observed: Sequence[float] | FloatArray, alpha: float
+) -> tuple[float, float, float]:
+    """Fixture centers: exponential moving average with alpha 0.35 (section 3.3)."""
+    x, y, z = ((1 - alpha) * p + alpha * o for p, o in zip(previous, observed, strict=True))
+    return (float(x), float(y), float(z))

@@ -1,0 +1,116 @@
+"""Fixture discovery, promotion, verification requests and support parents (sections 3.2, 3.3)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from core.decide import decide
+from core.evolve import fold
+from core.fixtures import FixtureProposal, FixtureTrackView, associate_fixtures, dbscan, kept_voxels
+from core.params import FixtureParams
+from core.state import SceneState
+from tests.core.rendered import COUNTER, COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches
+
+
+def run(state, batch_list):
+    events = []
+    for batch in batch_list:
+        new = decide(state, batch)
+        state = fold(state, new)
+        events += new
+    return state, events
+
+
+def fixtures_of(state):
+    return [t for t in state.tracks.values() if t.kind == "fixture"]
+
+
+def test_dbscan_separates_blobs_and_drops_noise():
+    rng = np.random.default_rng(0)
+    blob_a = rng.normal([0, 0, 0], 0.02, size=(30, 3))
+    blob_b = rng.normal([1, 0, 0], 0.02, size=(30, 3))
+    noise = np.array([[5.0, 5.0, 5.0]])
+    labels = dbscan(np.vstack([blob_a, blob_b, noise]), eps=0.1, min_points=4)
+    assert len(set(labels[:30])) == 1 and len(set(labels[30:60])) == 1
+    assert labels[0] != labels[30] and labels[60] == -1
+
+
+def test_voxels_need_the_class_threshold_and_a_margin():
+    params = FixtureParams(
+        taxonomy=("table", "desk"), default_class_threshold=0.4, min_class_margin=0.05
+    )
+    counts = np.array([1, 2, 1])
+    sums = np.array(
+        [[0.6, 0.3], [0.9, 0.84], [0.3, 0.1]]
+    )  # clear; too close (0.45 vs 0.42); too low
+    kept, _, margins = kept_voxels(counts, sums, params)
+    assert kept.tolist() == [0, -1, -1]
+    assert math.isclose(margins[1], 0.03)
+
+
+def test_residual_cluster_inside_a_matched_fixture_is_absorbed():
+    params = FixtureParams()
+    track = FixtureTrackView("trk-000001", "table", (2.0, 2.0, 0.375), (1.4, 0.8, 0.75))
+    whole = FixtureProposal(
+        "table", np.array([2.0, 2.0, 0.4]), np.array([1.3, 0.8, 0.75]), 200, 0.3, 0.6, 10, "f"
+    )
+    piece = FixtureProposal(
+        "table", np.array([2.5, 2.1, 0.7]), np.array([0.3, 0.3, 0.1]), 20, 0.3, 0.6, 5, "f"
+    )
+    far = FixtureProposal(
+        "table", np.array([4.5, 4.0, 0.4]), np.array([1.0, 0.6, 0.75]), 100, 0.3, 0.6, 5, "f"
+    )
+    matches, absorbed = associate_fixtures([whole, piece, far], [track], params)
+    assert matches == {0: "trk-000001"} and absorbed == {1: "trk-000001"}
+
+
+def test_partial_views_give_one_confirmed_fixture_each_with_right_label_and_center():
+    views = [*TABLE_VIEWS, *COUNTER_VIEWS] * 2
+    state, events = run(SceneState(), batches(ROOM, views, "b", objects=False))
+    found = fixtures_of(state)
+    assert sorted(t.label for t in found) == ["counter", "table"]
+    assert all(t.lifecycle == "confirmed" for t in found)
+    truth = {"table": TABLE.center, "counter": COUNTER.center}
+    for track in found:
+        assert math.dist(track.center, truth[track.label]) < 0.3, (track.label, track.center)
+    confirms = [e for e in events if e.type == "confirm"]
+    assert len(confirms) == 2 and len({e.track_id for e in confirms}) == 2
+
+
+def test_conflicting_class_scores_wait_for_verification():
+    scores = {"table": {"table": 0.50, "desk": 0.48}, "counter": {"counter": 0.6, "table": 0.3}}
+    state, events = run(
+        SceneState(), batches(ROOM, TABLE_VIEWS * 3, "b", scores=scores, objects=False)
+    )
+    requested = [e for e in events if e.type == "verification_requested"]
+    assert len(requested) == 1
+    table = state.tracks[requested[0].track_id]
+    assert table.lifecycle == "tentative" and table.verification == "pending"
+    assert (
+        "table" in requested[0].details["candidates"]
+        and "desk" in requested[0].details["candidates"]
+    )
+    assert not any(e.type == "confirm" and e.track_id == table.track_id for e in events)
+    assert (
+        requested[0].details["candidates"]["table"]
+        > requested[0].details["candidates"]["desk"]
+        > 0.4
+    )
+
+
+def test_mug_on_the_table_gets_the_table_as_parent_and_carried_to_the_counter_reparents_once():
+    state, events = run(SceneState(), batches(ROOM, TABLE_VIEWS * 3 + COUNTER_VIEWS * 3, "b"))
+    table_id = next(t.track_id for t in fixtures_of(state) if t.label == "table")
+    counter_id = next(t.track_id for t in fixtures_of(state) if t.label == "counter")
+    mug = next(t for t in state.tracks.values() if t.label == "mug")
+    assert mug.parent == table_id and mug.lifecycle == "confirmed"
+    carried = ROOM.moved("mug", (COUNTER.center[0], COUNTER.center[1], COUNTER.top_z + 0.05))
+    state, events = run(state, batches(carried, COUNTER_VIEWS * 2, "c"))
+    reparents = [e for e in events if e.type == "reparent"]
+    assert len(reparents) == 1
+    assert reparents[0].track_id == mug.track_id
+    assert reparents[0].details == {"old_parent": table_id, "new_parent": counter_id}
+    assert state.tracks[mug.track_id].parent == counter_id
+    assert [t.track_id for t in state.tracks.values() if t.label == "mug"] == [mug.track_id]
