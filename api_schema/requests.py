@@ -54,6 +54,15 @@ RleCounts = Annotated[
 ]
 
 
+class BaselineRef(BaseModel):
+    """A frozen baseline package of a scene."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    scene_id: NonEmptyLabel = Field(description="Scene the baseline was frozen in.")
+    version: int = Field(ge=1, description="Baseline version in that scene.")
+
+
 class SceneCreate(BaseModel):
     """Body of `POST /v1/scenes`."""
 
@@ -64,6 +73,11 @@ class SceneCreate(BaseModel):
         None,
         description="Overrides of the method's default parameters (a partial nested object); "
         "recorded in the scene's log.",
+    )
+    baseline: BaselineRef | None = Field(
+        None,
+        description="Start a later session in the same house from this frozen baseline: its "
+        "fixtures keep their canonical identities and are pinned.",
     )
 
 
@@ -187,3 +201,48 @@ class BatchIn(BaseModel):
                 )
             first_index[frame.frame_id] = index
         return frames
+
+
+class VerdictIn(BaseModel):
+    """Body of `POST /v1/scenes/{scene_id}/tracks/{track_id}/verification`."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    verdict: Literal["confirm", "reject"] = Field(description="The verifier's answer.")
+    label: NonEmptyLabel | None = Field(
+        None, description="Corrected label (default: the track's label)."
+    )
+    source: NonEmptyLabel = Field(description="Who answered (model name, operator...).")
+    frame_id: NonEmptyLabel | None = Field(
+        None,
+        description="The observation the verdict is about; a second verdict must name a new one.",
+    )
+
+
+class InspectionIn(BaseModel):
+    """Body of `POST /v1/scenes/{scene_id}/inspections`: one fixture-centered capture."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    fixture_id: NonEmptyLabel = Field(description="The confirmed fixture inspected.")
+    frames: list[FrameIn] = Field(
+        min_length=1,
+        description="The primary view first, then alternates (used only for retry, never fused).",
+    )
+    fixture_verified: bool | None = Field(
+        None,
+        description="The client's model's verification of the fixture class at its support region.",
+    )
+    capture_id: str | None = Field(
+        None,
+        min_length=1,
+        max_length=200,
+        pattern=r"^[A-Za-z0-9._:-]+$",
+        description="Client id of the capture (default: generated).",
+    )
+
+    @field_validator("frames")
+    @classmethod
+    def _frame_ids_unique(cls, frames: list[FrameIn]) -> list[FrameIn]:
+        """Reject a capture that names the same frame twice."""
+        return BatchIn._frame_ids_unique(frames)

@@ -61,6 +61,13 @@ class GraphNode(BaseModel):
     class_probabilities: dict[str, float]
     last_observed: float | None = Field(description="Timestamp of the last reliable observation.")
     last_observed_frame: str | None
+    pinned: bool = Field(description="A fixture of a frozen baseline: exempt from dynamic removal.")
+    verification: str | None = Field(
+        description="pending, confirmed or rejected (coarse verification)."
+    )
+    inspection: str | None = Field(
+        description="Fixtures: completed or abandoned close-range inspection."
+    )
 
 
 class GraphEdge(BaseModel):
@@ -78,6 +85,9 @@ class Graph(BaseModel):
     seq: int
     nodes: list[GraphNode]
     edges: list[GraphEdge]
+    pending_verifications: list[str] = Field(
+        description="Fixture hypotheses waiting for a verdict (not published until then)."
+    )
 
 
 class EventOut(BaseModel):
@@ -164,3 +174,108 @@ class Health(BaseModel):
     status: Literal["ok"]
     database: str
     batches: dict[str, int]
+
+
+class VerificationItem(BaseModel):
+    """A track waiting for (or with) a coarse-stage verdict."""
+
+    track_id: str
+    label: str
+    state: str
+    verification: str | None
+    candidates: dict[str, float] = Field(
+        description="Mean class similarity over the fixture's evidence."
+    )
+    batch_votes: dict[str, float] = Field(description="Share of supporting batches per top class.")
+    best_frame: str | None = Field(description="The frame that showed most of it: crop this one.")
+    requested_seq: int | None = Field(description="Seq of the verification request.")
+
+
+class VerificationList(BaseModel):
+    """Verification queue."""
+
+    verifications: list[VerificationItem]
+
+
+class CommandResult(BaseModel):
+    """Events a command appended."""
+
+    scene_id: str
+    track_id: str | None
+    state: str | None
+    events: list[EventOut]
+
+
+class BaselineSummary(BaseModel):
+    """One frozen baseline of a scene."""
+
+    version: int
+    seq: int = Field(description="Seq of the freeze event.")
+    sha256: str = Field(description="sha256 of the canonical JSON package.")
+    fixture_count: int
+
+
+class BaselineList(BaseModel):
+    """Every baseline of a scene."""
+
+    baselines: list[BaselineSummary]
+
+
+class BaselinePackage(BaseModel):
+    """An immutable, versioned package of confirmed fixtures."""
+
+    scene_id: str
+    version: int
+    seq: int
+    sha256: str
+    package: dict[str, Any] = Field(
+        description="The canonical package (its JSON bytes hash to sha256)."
+    )
+
+
+class Delta(BaseModel):
+    """The runtime delta: the events after a baseline was frozen."""
+
+    scene_id: str
+    baseline: BaselineSummary
+    events: list[EventOut]
+    next_after: int | None
+
+
+class Inspection(BaseModel):
+    """One capture of the inspection ledger."""
+
+    seq: int
+    capture_id: str
+    fixture_id: str
+    frames: list[str]
+    primary_frame: str | None
+    fixture_verified: bool | None
+    outcome: str = Field(description="completed, support_not_visible or parent_rejected.")
+    children: list[str]
+    attempts: int = Field(description="Failed captures of this fixture so far.")
+    status: str | None = Field(
+        description="completed, abandoned (retries used up) or null (queued)."
+    )
+
+
+class InspectionList(BaseModel):
+    """The capture ledger of a scene."""
+
+    inspections: list[Inspection]
+
+
+class InspectionQueueItem(BaseModel):
+    """A confirmed fixture of the inspection taxonomy whose inspection is unresolved."""
+
+    fixture_id: str
+    label: str
+    p_exist: float
+    center: list[float]
+    attempts: int
+
+
+class InspectionQueue(BaseModel):
+    """Q_t of section 3.4."""
+
+    fixtures: list[InspectionQueueItem]

@@ -42,7 +42,7 @@ def decide(state: SceneState, batch: Batch, params: Params | None = None) -> lis
 def ground_frame(frame: Frame, params: Params) -> list[Proposal]:
     """Object proposals of one frame; masks with too little valid depth are rejected."""
     proposals = []
-    for detection in frame.detections:
+    for index, detection in enumerate(frame.detections):
         if detection.kind != "object":
             continue  # fixture masks feed the voxel map instead
         proposal = ground_detection(
@@ -51,6 +51,7 @@ def ground_frame(frame: Frame, params: Params) -> list[Proposal]:
             params.proposal,
             params.visibility.min_range_m,
             params.visibility.max_range_m,
+            index,
         )
         if proposal is not None:
             proposals.append(proposal)

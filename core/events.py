@@ -166,3 +166,12 @@ def event_from_record(record: Mapping[str, Any]) -> Event:
         frame_id=record.get("frame_id"),
         details=record.get("details") or {},
     )
+
+
+def touched_tracks(event: Event) -> tuple[str, ...]:
+    """Every track whose state the event changes (scene-level events may change several)."""
+    if isinstance(event, BaselineFrozen):
+        return tuple(event.details["fixture_ids"])
+    if isinstance(event, BaselineLoaded):
+        return tuple(record["track_id"] for record in event.details["fixtures"])
+    return () if event.track_id is None else (event.track_id,)

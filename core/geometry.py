@@ -27,6 +27,7 @@ class Proposal:
     frame_id: str
     timestamp: float
     bottom_z: float  # low percentile of the inlier heights: where the object rests
+    detection_index: int = -1  # which detection of its frame it grounds
 
 
 def backproject_pixels(
@@ -105,6 +106,7 @@ def ground_detection(
     params: ProposalParams,
     min_range_m: float,
     max_range_m: float,
+    detection_index: int = -1,
 ) -> Proposal | None:
     """Back-project a mask's valid depth through (K, T); None when valid-depth support is too small."""
     flat_index = np.flatnonzero(detection.mask)
@@ -148,6 +150,7 @@ def ground_detection(
         frame_id=frame.frame_id,
         timestamp=frame.timestamp,
         bottom_z=float(low[2]),
+        detection_index=detection_index,
     )
 
 

@@ -30,6 +30,9 @@ def node_attributes(track: Track) -> dict[str, Any]:
         "class_probabilities": track.class_probabilities(),
         "last_observed": track.last_observed,
         "last_observed_frame": track.last_observed_frame,
+        "pinned": track.pinned,
+        "verification": track.verification,
+        "inspection": track.inspection_status,
     }
 
 
@@ -53,9 +56,18 @@ def publish(
         graph.add_node(track_id, **node_attributes(track))
     for track_id in list(graph.nodes):
         support = state.tracks[track_id].parent
-        if support is not None and support in state.tracks:
+        if support is not None and support in graph:  # both ends published (and not filtered out)
             graph.add_edge(track_id, support, relation="on")
     return graph
+
+
+def pending_verifications(state: SceneState) -> list[str]:
+    """Tracks waiting for a verdict: the graph says so rather than publishing them."""
+    return sorted(
+        t.track_id
+        for t in state.tracks.values()
+        if t.verification == "pending" and t.lifecycle != "removed"
+    )
 
 
 def graph_to_dict(graph: nx.DiGraph) -> dict[str, Any]:

@@ -203,7 +203,9 @@ def visible_miss(track: Track, samples: int, frame_id: str, params: Params) -> l
     }
     lifecycle = track.lifecycle
     emitted: list[Event] = [TrackUpdated(track.track_id, lifecycle, frame_id, details)]
-    if should_demote(lifecycle, p_exist, lifecycle_params):
+    if not track.pinned and should_demote(
+        lifecycle, p_exist, lifecycle_params
+    ):  # pinned: never unpublished
         lifecycle = "demoted"
         emitted.append(TrackDemoted(track.track_id, lifecycle, frame_id, {"p_exist": p_exist}))
     if should_remove(lifecycle, p_exist, misses, track.pinned, lifecycle_params):

@@ -10,7 +10,16 @@ from fastapi import FastAPI
 from api_schema import Health
 from service.bootstrap import Container, build_container
 from service.errors import BodySizeLimit, install_problem_handlers
-from service.routes import batches, events, graph, scenes, tracks
+from service.routes import (
+    baselines,
+    batches,
+    events,
+    graph,
+    inspections,
+    scenes,
+    tracks,
+    verifications,
+)
 from service.states import StateReader
 from service.worker import WorkerThread
 
@@ -46,7 +55,7 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.state.states = StateReader(container.log)
     install_problem_handlers(app)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
-    for module in (scenes, batches, graph, events, tracks):
+    for module in (scenes, batches, graph, events, tracks, verifications, baselines, inspections):
         app.include_router(module.router)
 
     @app.get("/healthz", response_model=Health, tags=["health"])

@@ -57,6 +57,11 @@ def decode_batch(batch: BatchIn) -> Batch:
     return Batch(batch_id=batch.batch_id, frames=frames)
 
 
+def decode_frames(frames: list[FrameIn], path: str = "frames") -> tuple[Frame, ...]:
+    """Decode a list of frames (an inspection's views); `InvalidObservation` names the field."""
+    return tuple(_decode_frame(frame, f"{path}[{index}]") for index, frame in enumerate(frames))
+
+
 def _decode_frame(frame: FrameIn, path: str) -> Frame:
     """Decode one frame: pose, depth, then each detection against the depth size."""
     intrinsics = Intrinsics(**frame.intrinsics.model_dump())

@@ -16,6 +16,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from core.errors import DomainError, InvalidCommand, StateConflict, UnknownTrack
 from service.codec import InvalidObservation
 from service.store.errors import BatchConflict, SceneNotFound, SeqOutOfRange, StoreError
 
@@ -265,10 +266,36 @@ async def _handle_store_error(request: Request, exc: Exception) -> Response:
     return await _handle_unexpected(request, exc)
 
 
+# The core's command errors and the HTTP answer each gets.
+_DOMAIN_PROBLEMS: dict[type[DomainError], tuple[int, str, str]] = {
+    UnknownTrack: (404, "Not Found", "/problems/unknown-track"),
+    InvalidCommand: (422, "Invalid command", "/problems/invalid-command"),
+    StateConflict: (409, "Conflict", "/problems/state-conflict"),
+}
+
+
+async def _handle_domain_error(request: Request, exc: Exception) -> Response:
+    """A command the scene's state does not allow: nothing was appended."""
+    assert isinstance(exc, DomainError)
+    status, title, problem_type = next(
+        (answer for kind, answer in _DOMAIN_PROBLEMS.items() if isinstance(exc, kind)),
+        (409, "Conflict", "/problems/state-conflict"),
+    )
+    return _problem_response(
+        status=status,
+        title=title,
+        detail=exc.detail,
+        type=problem_type,
+        field=exc.field,
+        errors=[FieldError(exc.field, exc.detail)],
+    )
+
+
 def install_problem_handlers(app: FastAPI) -> None:
     """Make every error response of `app` an RFC 9457 problem+json document."""
     app.add_exception_handler(ProblemError, _handle_problem)
     app.add_exception_handler(StoreError, _handle_store_error)
+    app.add_exception_handler(DomainError, _handle_domain_error)
     app.add_exception_handler(InvalidObservation, _handle_invalid_observation)
     app.add_exception_handler(RequestValidationError, _handle_request_validation)
     app.add_exception_handler(StarletteHTTPException, _handle_http_exception)

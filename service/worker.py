@@ -17,8 +17,7 @@ from service.bootstrap import Container
 from service.codec import decode_batch
 from service.store.engine import write_transaction
 from service.store.errors import ConcurrencyConflict, LeaseLost
-from service.store.event_log import snapshot_due
-from service.store.projection import last_seq_by_track, write_tracks
+from service.store.projection import project_append
 from service.store.queue import Claim
 
 logger = logging.getLogger("pbdag.worker")
@@ -81,13 +80,16 @@ class Worker:
                     connection, claim.scene_id, state.head_seq, events, claim.batch_id
                 )
                 if seqs is not None:
-                    write_tracks(
-                        connection, claim.scene_id, new_state, last_seq_by_track(seqs[0], events)
+                    project_append(
+                        connection,
+                        container.log,
+                        claim.scene_id,
+                        state,
+                        events,
+                        new_state,
+                        seqs[0],
+                        container.settings.snapshot_interval,
                     )
-                    if snapshot_due(
-                        state.head_seq, new_state.head_seq, container.settings.snapshot_interval
-                    ):
-                        container.log.save_snapshot(connection, claim.scene_id, new_state)
                 container.queue.complete(connection, claim, seqs)
         except LeaseLost:
             self._states.pop(claim.scene_id, None)

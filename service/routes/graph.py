@@ -7,7 +7,7 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Query
 
 from api_schema import Graph
-from core.graph import graph_to_dict, publish
+from core.graph import graph_to_dict, pending_verifications, publish
 from service.deps import StatesDep
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["graph"])
@@ -33,5 +33,10 @@ def get_graph(
     state = states.state(scene_id, as_of)
     graph = publish(state, include_all=include == "all", parent=parent, label=label)
     return Graph.model_validate(
-        {"scene_id": scene_id, "seq": state.head_seq, **graph_to_dict(graph)}
+        {
+            "scene_id": scene_id,
+            "seq": state.head_seq,
+            "pending_verifications": pending_verifications(state),
+            **graph_to_dict(graph),
+        }
     )

@@ -6,8 +6,10 @@ from fastapi import APIRouter
 
 from api_schema import Scene, SceneCreate, SceneList
 from core.params import Params
+from service.commands import create_scene_from_baseline
 from service.deps import ContainerDep
 from service.errors import FieldError, ProblemError
+from service.routes.baselines import read_package
 from service.store.event_log import SceneRecord
 
 router = APIRouter(prefix="/v1/scenes", tags=["scenes"])
@@ -36,7 +38,14 @@ def create_scene(body: SceneCreate, container: ContainerDep) -> Scene:
         raise InvalidParams(
             str(error), field=field, errors=[FieldError(field, str(error))]
         ) from error
-    return scene_out(container.log.create_scene(body.name, params))
+    if body.baseline is None:
+        return scene_out(container.log.create_scene(body.name, params))
+    # A later session in the same house: the package's fixtures keep their identities.
+    source = read_package(container, body.baseline.scene_id, body.baseline.version)
+    reference = {"scene_id": source.scene_id, "version": source.version, "sha256": source.sha256}
+    return scene_out(
+        create_scene_from_baseline(container, body.name, params, source.package, reference)
+    )
 
 
 @router.get("", response_model=SceneList)

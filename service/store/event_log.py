@@ -138,18 +138,32 @@ class EventLog:
 
     def create_scene(self, name: str, params: Params, scene_id: str | None = None) -> SceneRecord:
         """A new scene whose log starts with `scene_created` (seq 0) recording its parameters."""
+        with write_transaction(self.engine) as connection:
+            return self.insert_scene(connection, name, params, scene_id)[0]
+
+    def insert_scene(
+        self,
+        connection: sa.Connection,
+        name: str,
+        params: Params,
+        scene_id: str | None = None,
+        baseline: dict[str, Any] | None = None,
+    ) -> tuple[SceneRecord, SceneCreated]:
+        """Insert the scene row and its event 0 inside the caller's transaction."""
         scene_id = scene_id or f"scn-{uuid.uuid4().hex[:12]}"
         now = self.clock()
         params_json = orjson.dumps(params.to_dict(), option=orjson.OPT_SORT_KEYS).decode()
-        created = SceneCreated(None, None, None, {"name": name, "params": params.to_dict()})
-        with write_transaction(self.engine) as connection:
-            connection.execute(
-                scenes.insert().values(
-                    id=scene_id, name=name, params=params_json, head_seq=0, created_at=now
-                )
+        details: dict[str, Any] = {"name": name, "params": params.to_dict()}
+        if baseline is not None:
+            details["baseline"] = baseline
+        connection.execute(
+            scenes.insert().values(
+                id=scene_id, name=name, params=params_json, head_seq=0, created_at=now
             )
-            connection.execute(events.insert(), [self._event_row(scene_id, 0, created, None, now)])
-        return SceneRecord(scene_id, name, params.to_dict(), 0, now)
+        )
+        created = SceneCreated(None, None, None, details)
+        connection.execute(events.insert(), [self._event_row(scene_id, 0, created, None, now)])
+        return SceneRecord(scene_id, name, params.to_dict(), 0, now), created
 
     def scene(self, scene_id: str, connection: sa.Connection | None = None) -> SceneRecord:
         """The scene row; SceneNotFound when absent."""

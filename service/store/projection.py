@@ -2,19 +2,20 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import orjson
 import sqlalchemy as sa
 
-from core.events import Event
-from core.evolve import fold
+from core.baseline import baseline_package, canonical_bytes, package_sha256
+from core.events import BaselineFrozen, Event, touched_tracks
+from core.evolve import evolve, fold
 from core.state import SceneState, Track
 from service.store.engine import read_transaction, write_transaction
-from service.store.event_log import SNAPSHOT_VERSION, EventLog, encode_snapshot
-from service.store.tables import snapshots, tracks
+from service.store.event_log import SNAPSHOT_VERSION, EventLog, encode_snapshot, snapshot_due
+from service.store.tables import baselines, snapshots, tracks
 
 
 def track_row(scene_id: str, track: Track, seq: int) -> dict[str, Any]:
@@ -40,8 +41,8 @@ def last_seq_by_track(first_seq: int, new_events: Iterable[Event]) -> dict[str, 
     """For each track touched by events numbered from `first_seq`, the seq of its last event."""
     touched: dict[str, int] = {}
     for offset, event in enumerate(new_events):
-        if event.track_id is not None:
-            touched[event.track_id] = first_seq + offset
+        for track_id in touched_tracks(event):
+            touched[track_id] = first_seq + offset
     return touched
 
 
@@ -58,6 +59,54 @@ def write_tracks(
     connection.execute(
         tracks.insert(), [track_row(scene_id, state.tracks[i], touched[i]) for i in ids]
     )
+
+
+def write_baseline(
+    connection: sa.Connection,
+    scene_id: str,
+    state_before: SceneState,
+    event: BaselineFrozen,
+    seq: int,
+) -> bytes:
+    """Store the package a freeze event names, rebuilt from the state just before it."""
+    package = baseline_package(state_before, scene_id, int(event.details["version"]), seq)
+    body = canonical_bytes(package)
+    if package_sha256(package) != event.details["sha256"]:
+        raise ValueError(
+            f"baseline {event.details['version']} of {scene_id}: package differs from its event"
+        )
+    connection.execute(
+        baselines.insert().values(
+            scene_id=scene_id,
+            version=package["version"],
+            seq=seq,
+            sha256=event.details["sha256"],
+            body=body,
+        )
+    )
+    return body
+
+
+def project_append(
+    connection: sa.Connection,
+    log: EventLog,
+    scene_id: str,
+    state_before: SceneState,
+    new_events: Sequence[Event],
+    state_after: SceneState,
+    first_seq: int,
+    snapshot_interval: int,
+) -> None:
+    """Every projection of an append, in the append's transaction: tracks, packages, snapshot."""
+    write_tracks(connection, scene_id, state_after, last_seq_by_track(first_seq, new_events))
+    if any(isinstance(event, BaselineFrozen) for event in new_events):
+        state = state_before
+        for offset, event in enumerate(new_events):
+            if isinstance(event, BaselineFrozen):
+                write_baseline(connection, scene_id, state, event, first_seq + offset)
+            state = evolve(state, event)
+    if snapshot_due(state_before.head_seq, state_after.head_seq, snapshot_interval):
+        log.save_snapshot(connection, scene_id, state_after)
 
 
 def query_tracks(
@@ -89,11 +138,12 @@ class SceneRebuild:
     events: int
     tracks_differ: list[str] = field(default_factory=list)
     snapshots_differ: list[int] = field(default_factory=list)
+    baselines_differ: list[int] = field(default_factory=list)
 
     @property
     def identical(self) -> bool:
         """True when the rebuilt projections equal the old ones bit for bit."""
-        return not self.tracks_differ and not self.snapshots_differ
+        return not self.tracks_differ and not self.snapshots_differ and not self.baselines_differ
 
 
 def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
@@ -109,17 +159,28 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
                 sa.select(snapshots.c.seq, snapshots.c.body).where(snapshots.c.scene_id == scene_id)
             )
         }
+        old_baselines = {
+            row.version: (row.seq, row.sha256, row.body)
+            for row in connection.execute(
+                sa.select(baselines).where(baselines.c.scene_id == scene_id)
+            )
+        }
     # Replay from seq 0, snapshotting at the same positions as before.
     state, count = SceneState(), 0
     new_snapshots: dict[int, bytes] = {}
     touched: dict[str, int] = {}
     pending = sorted(old_snapshots)
     batch: list[Event] = []
+    frozen: list[tuple[SceneState, BaselineFrozen, int]] = []
     for stored in log.iter_events(scene_id):
-        batch.append(stored.to_core())
+        event = stored.to_core()
+        if isinstance(event, BaselineFrozen):  # its package is rebuilt from the state before it
+            state, batch = fold(state, batch), []
+            frozen.append((state, event, stored.seq))
+        batch.append(event)
         count += 1
-        if stored.track_id is not None:
-            touched[stored.track_id] = stored.seq
+        for track_id in touched_tracks(event):
+            touched[track_id] = stored.seq
         if pending and stored.seq == pending[0]:
             state = fold(state, batch)
             batch = []
@@ -128,7 +189,16 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
     with write_transaction(log.engine) as connection:
         connection.execute(sa.delete(tracks).where(tracks.c.scene_id == scene_id))
         connection.execute(sa.delete(snapshots).where(snapshots.c.scene_id == scene_id))
+        connection.execute(sa.delete(baselines).where(baselines.c.scene_id == scene_id))
         write_tracks(connection, scene_id, state, touched)
+        new_baselines = {
+            int(event.details["version"]): (
+                seq,
+                str(event.details["sha256"]),
+                write_baseline(connection, scene_id, before, event, seq),
+            )
+            for before, event, seq in frozen
+        }
         for seq, body in sorted(new_snapshots.items()):
             connection.execute(
                 snapshots.insert().values(
@@ -144,6 +214,11 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
         )
         if new != old_tracks.get(track_id):
             report.tracks_differ.append(track_id)
+    report.baselines_differ = [
+        version
+        for version in sorted(set(old_baselines) | set(new_baselines))
+        if old_baselines.get(version) != new_baselines.get(version)
+    ]
     report.snapshots_differ = [
         seq for seq in sorted(old_snapshots) if new_snapshots.get(seq) != old_snapshots[seq]
     ]

@@ -93,4 +93,15 @@ snapshots = sa.Table(
     sa.Column("body", sa.LargeBinary, nullable=False),  # zlib(orjson(SceneState.to_dict()))
 )
 
-PROJECTION_TABLES = (tracks, snapshots)
+# Projection: frozen baseline packages, canonical JSON named by its sha256 (rebuilt bit for bit).
+baselines = sa.Table(
+    "baselines",
+    metadata,
+    sa.Column("scene_id", sa.String(64), sa.ForeignKey("scenes.id"), primary_key=True),
+    sa.Column("version", sa.Integer, primary_key=True, autoincrement=False),
+    sa.Column("seq", sa.BigInteger, nullable=False),
+    sa.Column("sha256", sa.String(64), nullable=False),
+    sa.Column("body", sa.LargeBinary, nullable=False),
+)
+
+PROJECTION_TABLES = (tracks, snapshots, baselines)

@@ -1,0 +1,112 @@
+"""The frozen structural baseline B^(0) = Freeze(B_t) (sections 3.1, 3.2): versioned and immutable."""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Mapping
+from typing import Any
+
+import orjson
+
+from core.errors import StateConflict
+from core.events import BaselineFrozen, BaselineLoaded, Event
+from core.state import SceneState, Track
+
+PACKAGE_FORMAT = "pbdag-baseline/1"
+
+
+def baseline_package(
+    state: SceneState, scene_id: str, version: int, frozen_at_seq: int
+) -> dict[str, Any]:
+    """The confirmed fixtures as a canonical package (everything a later session needs)."""
+    fixtures = [
+        {
+            "track_id": track.track_id,
+            "label": track.label,
+            "class_probabilities": track.class_probabilities(),
+            "class_evidence": dict(sorted(track.class_evidence.items())),
+            "center": list(track.center),
+            "extent": list(track.extent),
+            "existence_logodds": track.existence_logodds,
+            "p_exist": track.p_exist,
+        }
+        for track in (state.tracks[i] for i in sorted(state.tracks))
+        if track.kind == "fixture" and track.lifecycle == "confirmed"
+    ]
+    return {
+        "format": PACKAGE_FORMAT,
+        "scene_id": scene_id,
+        "version": version,
+        "frozen_at_seq": frozen_at_seq,
+        "fixtures": fixtures,
+    }
+
+
+def canonical_bytes(package: Mapping[str, Any]) -> bytes:
+    """Canonical JSON: sorted keys, no whitespace; its sha256 names the package."""
+    return orjson.dumps(package, option=orjson.OPT_SORT_KEYS)
+
+
+def package_sha256(package: Mapping[str, Any]) -> str:
+    """Hex sha256 of the canonical package."""
+    return hashlib.sha256(canonical_bytes(package)).hexdigest()
+
+
+def decide_freeze(state: SceneState, scene_id: str) -> tuple[list[Event], dict[str, Any]]:
+    """Freeze the confirmed fixtures: the event (which pins them) and the package it names."""
+    version = (state.baselines[-1].version if state.baselines else 0) + 1
+    package = baseline_package(state, scene_id, version, state.head_seq + 1)
+    if not package["fixtures"]:
+        raise StateConflict("the scene has no confirmed fixture to freeze")
+    fixture_ids = [fixture["track_id"] for fixture in package["fixtures"]]
+    event = BaselineFrozen(
+        None,
+        None,
+        None,
+        {"version": version, "sha256": package_sha256(package), "fixture_ids": fixture_ids},
+    )
+    return [event], package
+
+
+def decide_load(package: Mapping[str, Any]) -> list[Event]:
+    """A new session from a package: its fixtures keep their canonical identities, pinned."""
+    records = [loaded_fixture(fixture) for fixture in package["fixtures"]]
+    numbers = [
+        int(record["track_id"].rsplit("-", 1)[-1])
+        for record in records
+        if record["track_id"][-1].isdigit()
+    ]
+    return [
+        BaselineLoaded(
+            None,
+            None,
+            None,
+            {
+                "source": {
+                    "scene_id": package["scene_id"],
+                    "version": package["version"],
+                    "sha256": package_sha256(package),
+                },
+                "fixtures": records,
+                "next_track_number": max(numbers, default=0) + 1,
+            },
+        )
+    ]
+
+
+def loaded_fixture(fixture: Mapping[str, Any]) -> dict[str, Any]:
+    """The track record of a baseline fixture: confirmed, published where the package says, pinned."""
+    center = list(fixture["center"])
+    return Track(
+        track_id=fixture["track_id"],
+        kind="fixture",
+        lifecycle="confirmed",
+        class_evidence=dict(fixture["class_evidence"]),
+        existence_logodds=float(fixture["existence_logodds"]),
+        center=(center[0], center[1], center[2]),
+        extent=(fixture["extent"][0], fixture["extent"][1], fixture["extent"][2]),
+        recent_centers=(),
+        published_center=(center[0], center[1], center[2]),
+        pinned=True,
+        verification=None,
+    ).to_dict()

@@ -1,0 +1,163 @@
+"""Fixture-centered inspection capture (sections 3.2 and 3.4): ground fine objects on one fixture.
+
+One primary view is grounded; alternate views only serve as a retry when the primary does not
+show the fixture's support region. They are never fused.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from core.association import associate
+from core.batch_evidence import BatchEvidence
+from core.decide import ground_frame
+from core.errors import InvalidCommand, StateConflict, UnknownTrack
+from core.events import Event, InspectionRecorded, TrackConfirmed
+from core.geometry import Proposal
+from core.observation import Frame
+from core.params import Params
+from core.state import SceneState, Track
+from core.support import SupportSurface, support_of
+from core.transitions import added_object, observed_object
+from core.visibility import samples_passed
+
+SUPPORT_SLAB_M = 0.02  # thickness of the sampled support region (the fixture's top surface)
+
+
+def support_region_visible(fixture: Track, frame: Frame, params: Params) -> int:
+    """How many samples of the fixture's top surface pass the visibility gate in `frame`."""
+    top = fixture.center[2] + fixture.extent[2] / 2
+    center = np.array([[fixture.center[0], fixture.center[1], top]])
+    extent = np.array([[fixture.extent[0], fixture.extent[1], SUPPORT_SLAB_M]])
+    return int(samples_passed(center, extent, frame, params.visibility)[0])
+
+
+def suppress(
+    proposals: Sequence[Proposal], masks: Sequence[np.ndarray], params: Params
+) -> list[int]:
+    """Indices kept by same-class NMS and cross-class overlap suppression (by mask IoU)."""
+    order = sorted(range(len(proposals)), key=lambda i: (-proposals[i].score, i))
+    kept: list[int] = []
+    for i in order:
+        clash = False
+        for k in kept:
+            inter = np.count_nonzero(masks[i] & masks[k])
+            union = np.count_nonzero(masks[i] | masks[k])
+            iou = inter / union if union else 0.0
+            limit = (
+                params.inspection.nms_mask_iou
+                if proposals[i].label == proposals[k].label
+                else params.inspection.cross_class_mask_iou
+            )
+            if iou > limit:
+                clash = True
+                break
+        if not clash:
+            kept.append(i)
+    return sorted(kept)
+
+
+def decide_inspection(
+    state: SceneState,
+    capture_id: str,
+    fixture_id: str,
+    frames: Sequence[Frame],
+    fixture_verified: bool | None,
+    params: Params | None = None,
+) -> list[Event]:
+    """Children of the fixture (add/confirm/reparent or update) and the capture's ledger entry."""
+    params = params or state.params
+    fixture = state.tracks.get(fixture_id)
+    if fixture is None:
+        raise UnknownTrack(f"fixture {fixture_id!r} does not exist", "fixture_id")
+    if fixture.kind != "fixture":
+        raise InvalidCommand(f"track {fixture_id!r} is an object, not a fixture", "fixture_id")
+    if fixture.lifecycle != "confirmed":
+        raise StateConflict(
+            f"fixture {fixture_id!r} is {fixture.lifecycle}, not confirmed", "fixture_id"
+        )
+    primary = next(
+        (
+            f
+            for f in frames
+            if support_region_visible(fixture, f, params) >= params.inspection.min_support_samples
+        ),
+        None,
+    )
+    outcome = "completed"
+    if fixture_verified is False:
+        outcome = "parent_rejected"  # the client's model says this is not the fixture
+    elif primary is None:
+        outcome = "support_not_visible"
+    events: list[Event] = []
+    children: list[str] = []
+    if outcome == "completed":
+        assert primary is not None
+        events, children = _attach_children(state, fixture, primary, params)
+    attempts = fixture.inspection_attempts + (outcome != "completed")
+    status = (
+        "completed"
+        if outcome == "completed"
+        else ("abandoned" if attempts >= params.inspection.max_attempts else None)
+    )
+    record: dict[str, Any] = {
+        "capture_id": capture_id,
+        "fixture_id": fixture_id,
+        "frames": [f.frame_id for f in frames],
+        "primary_frame": None if primary is None else primary.frame_id,
+        "fixture_verified": fixture_verified,
+        "outcome": outcome,
+        "children": children,
+        "attempts": attempts,
+        "status": status,
+    }
+    frame_id = primary.frame_id if primary is not None else (frames[0].frame_id if frames else None)
+    return [*events, InspectionRecorded(fixture_id, fixture.lifecycle, frame_id, record)]
+
+
+def _attach_children(
+    state: SceneState, fixture: Track, frame: Frame, params: Params
+) -> tuple[list[Event], list[str]]:
+    """Ground the primary view, keep what lies on this fixture, and attach it as children."""
+    surface = [SupportSurface(fixture.track_id, fixture.center, fixture.extent)]
+    proposals = ground_frame(frame, params)
+    masks = [frame.detections[p.detection_index].mask for p in proposals]
+    kept = [
+        i
+        for i in suppress(proposals, masks, params)
+        if support_of(proposals[i].center, proposals[i].bottom_z, surface, params.fixtures)
+        == fixture.track_id
+    ]
+    evidence = BatchEvidence(state, params)
+    chosen = [proposals[i] for i in kept]
+    matches = associate(chosen, evidence.pool(), params.association)
+    events: list[Event] = []
+    children: list[str] = []
+    next_number = state.next_track_number
+    for j, proposal in enumerate(chosen):
+        parents = [fixture.track_id]
+        track_id = matches.get(j)
+        if track_id is not None and state.tracks[track_id].kind == "object":
+            events += observed_object(state.tracks[track_id], [proposal], parents, params)
+        else:
+            track_id = f"trk-{next_number:06d}"
+            next_number += 1
+            added = added_object(track_id, [proposal], parents, params)
+            # A verified capture stands in for cross-batch confirmation (section 3.2).
+            confirm = TrackConfirmed(
+                track_id,
+                "confirmed",
+                frame.frame_id,
+                {
+                    "p_exist": added[0].details["p_exist"],
+                    "center": [float(v) for v in proposal.center],
+                    "batches_observed": 1,
+                    "reason": "inspection",
+                },
+            )
+            events += [added[0], confirm, *added[1:]]
+        children.append(track_id)
+    return events, children

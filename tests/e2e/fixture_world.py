@@ -1,0 +1,47 @@
+"""A room with a table and a counter, seen partially from several viewpoints, as wire batches."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bench.sim.camera import look_at
+from bench.sim.detector import detect, detect_fixtures
+from bench.sim.render import render
+from bench.sim.wire import make_batch, make_frame
+from bench.sim.world import World, object_on
+from tests.core.rendered import CAMERA, COUNTER, COUNTER_VIEWS, TABLE, TABLE_VIEWS
+
+MUG = object_on(TABLE, "mug", "mug", (0.1, 0.1, 0.1), at=(0.3, 0.0))
+ROOM = World(room_size=(6.0, 5.0, 2.6), fixtures=(TABLE, COUNTER), objects=(MUG,))
+FINE = (
+    object_on(TABLE, "book", "book", (0.2, 0.15, 0.05), at=(-0.35, -0.1)),
+    object_on(TABLE, "bowl", "bowl", (0.15, 0.15, 0.08), at=(0.0, 0.15)),
+    object_on(TABLE, "remote", "remote", (0.18, 0.06, 0.04), at=(-0.1, -0.2)),
+)
+CLOSE_VIEW = ((2.0, 1.2, 1.5), (2.0, 2.0, 0.75))  # fixture-centered, looking down at the table
+AWAY_VIEW = ((2.0, 1.2, 1.5), (2.0, -3.0, 1.2))  # the wall behind the robot: no support visible
+DISCOVERY = [*TABLE_VIEWS, *COUNTER_VIEWS] * 2
+
+
+def wire_frame(
+    world: World, view, frame_id: str, *, ambiguity=None, objects: bool = True, seed: int = 0
+) -> dict:
+    """One rendered frame with fixture masks (class scores) and object masks, in the wire format."""
+    eye, target = view
+    pose = look_at(eye, target)
+    rendered = render(world, CAMERA, pose)
+    rng = np.random.default_rng(seed)
+    detections = detect_fixtures(
+        rendered, world, rng, min_visible_pixels=200, score_noise=0.0, ambiguity=ambiguity
+    )
+    if objects:
+        detections += detect(rendered, world, rng, min_visible_pixels=30)
+    return make_frame(frame_id, 0.0, CAMERA, pose, rendered.depth, detections)
+
+
+def wire_batches(world: World, views, prefix: str, **kwargs) -> list[dict]:
+    """One single-frame batch per viewpoint."""
+    return [
+        make_batch(f"{prefix}{i}", [wire_frame(world, view, f"{prefix}{i}", **kwargs)])
+        for i, view in enumerate(views)
+    ]

@@ -1,0 +1,300 @@
+"""Issue 3 through the HTTP API: fixtures, verification, support, baselines, inspections."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+from fastapi.testclient import TestClient
+
+from service.app import create_app
+from service.store.projection import rebuild_scene
+from service.worker import Worker
+from tests.e2e.fixture_world import (
+    AWAY_VIEW,
+    CLOSE_VIEW,
+    COUNTER,
+    COUNTER_VIEWS,
+    DISCOVERY,
+    FINE,
+    ROOM,
+    TABLE,
+    TABLE_VIEWS,
+    wire_batches,
+    wire_frame,
+)
+
+
+@pytest.fixture
+def api(container):
+    with TestClient(create_app(container)) as client:
+        yield client, Worker(container), container
+
+
+def feed(client, worker, scene_id, bodies):
+    for body in bodies:
+        assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code == 202
+    worker.drain()
+    for body in bodies:
+        assert (
+            client.get(f"/v1/scenes/{scene_id}/batches/{body['batch_id']}").json()["status"]
+            == "done"
+        )
+
+
+def nodes(client, scene_id, **params):
+    return client.get(f"/v1/scenes/{scene_id}/graph", params=params).json()["nodes"]
+
+
+def discovered(client, worker, **kwargs):
+    scene_id = client.post("/v1/scenes", json={"name": "house"}).json()["id"]
+    feed(client, worker, scene_id, wire_batches(ROOM, DISCOVERY, "d", **kwargs))
+    return scene_id
+
+
+def fixture_ids(client, scene_id):
+    return {n["label"]: n["id"] for n in nodes(client, scene_id) if n["kind"] == "fixture"}
+
+
+def test_each_fixture_confirmed_once_with_label_center_and_the_mug_on_the_table(api):
+    client, worker, _ = api
+    scene_id = discovered(client, worker)
+    fixtures = [n for n in nodes(client, scene_id) if n["kind"] == "fixture"]
+    assert sorted(n["label"] for n in fixtures) == ["counter", "table"]
+    truth = {"table": TABLE.center, "counter": COUNTER.center}
+    for node in fixtures:
+        assert math.dist(node["center"], truth[node["label"]]) < 0.3
+    confirms = client.get(
+        f"/v1/scenes/{scene_id}/events", params={"type": "confirm", "limit": 1000}
+    ).json()["events"]
+    fixture_confirms = [e for e in confirms if e["track_id"] in {n["id"] for n in fixtures}]
+    assert len(fixture_confirms) == 2
+    ids = fixture_ids(client, scene_id)
+    on_table = nodes(client, scene_id, parent=ids["table"])
+    assert [n["label"] for n in on_table] == ["mug"]
+    graph = client.get(f"/v1/scenes/{scene_id}/graph").json()
+    assert {"source": on_table[0]["id"], "target": ids["table"], "relation": "on"} in graph["edges"]
+
+
+def test_mug_carried_to_the_counter_reparents_once_and_keeps_its_identity(api):
+    client, worker, _ = api
+    scene_id = discovered(client, worker)
+    ids = fixture_ids(client, scene_id)
+    mug_id = nodes(client, scene_id, label="mug")[0]["id"]
+    carried = ROOM.moved("mug", (COUNTER.center[0], COUNTER.center[1], COUNTER.top_z + 0.05))
+    feed(client, worker, scene_id, wire_batches(carried, COUNTER_VIEWS * 2, "c"))
+    reparents = client.get(
+        f"/v1/scenes/{scene_id}/events", params={"type": "reparent", "track_id": mug_id}
+    ).json()
+    assert [e["details"] for e in reparents["events"]][-1] == {
+        "old_parent": ids["table"],
+        "new_parent": ids["counter"],
+    }
+    after_table = [e for e in reparents["events"] if e["details"]["old_parent"] == ids["table"]]
+    assert len(after_table) == 1
+    assert [n["id"] for n in nodes(client, scene_id, label="mug")] == [mug_id]
+    assert nodes(client, scene_id, label="mug")[0]["parent"] == ids["counter"]
+
+
+@pytest.mark.parametrize("verdict", ["confirm", "reject"])
+def test_conflicting_fixture_waits_for_a_verdict(api, verdict):
+    client, worker, _ = api
+    ambiguous = {"table": {"table": 0.50, "desk": 0.48}}
+    scene_id = discovered(client, worker, ambiguity=ambiguous)
+    pending = client.get(f"/v1/scenes/{scene_id}/verifications").json()["verifications"]
+    assert len(pending) == 1
+    item = pending[0]
+    assert item["candidates"]["table"] > item["candidates"]["desk"] and item["best_frame"]
+    graph = client.get(f"/v1/scenes/{scene_id}/graph").json()
+    assert graph["pending_verifications"] == [item["track_id"]]
+    assert "table" not in {n["label"] for n in graph["nodes"]}
+    response = client.post(
+        f"/v1/scenes/{scene_id}/tracks/{item['track_id']}/verification",
+        json={"verdict": verdict, "source": "vlm-test", "frame_id": item["best_frame"]},
+    )
+    assert response.status_code == 201, response.text
+    assert response.json()["events"][0]["type"] == "verify"
+    after = client.get(f"/v1/scenes/{scene_id}/tracks/{item['track_id']}").json()
+    assert after["state"] == ("confirmed" if verdict == "confirm" else "removed")
+    assert client.get(f"/v1/scenes/{scene_id}/verifications").json()["verifications"] == []
+    again = client.post(
+        f"/v1/scenes/{scene_id}/tracks/{item['track_id']}/verification",
+        json={"verdict": "confirm", "source": "vlm-test", "frame_id": item["best_frame"]},
+    )
+    assert again.status_code == 409 and again.json()["field"] == "frame_id"
+
+
+def test_baseline_is_reproducible_pins_its_fixtures_and_seeds_a_new_session(api):
+    client, worker, container = api
+    scene_id = discovered(client, worker)
+    frozen = client.post(f"/v1/scenes/{scene_id}/baselines")
+    assert frozen.status_code == 201, frozen.text
+    package = frozen.json()
+    assert package["version"] == 1 and len(package["package"]["fixtures"]) == 2
+    assert rebuild_scene(container.log, scene_id).identical
+    assert client.get(f"/v1/scenes/{scene_id}/baselines/1").json()["sha256"] == package["sha256"]
+    # the table, still in view, stops being detected: pinned, it is never removed
+    blind = [
+        {**b, "frames": [{**f, "detections": []} for f in b["frames"]]}
+        for b in wire_batches(ROOM, TABLE_VIEWS * 5, "x")
+    ]
+    feed(client, worker, scene_id, blind)
+    ids = fixture_ids(client, scene_id)
+    table = client.get(f"/v1/scenes/{scene_id}/tracks/{ids['table']}").json()
+    assert table["state"] == "confirmed" and table["visible_misses"] >= 10
+    delta = client.get(f"/v1/scenes/{scene_id}/delta", params={"baseline": 1, "limit": 1000}).json()
+    assert delta["events"] and all(e["seq"] > package["seq"] for e in delta["events"])
+    # a later session in the same house keeps the fixture identities
+    later = client.post(
+        "/v1/scenes", json={"name": "next day", "baseline": {"scene_id": scene_id, "version": 1}}
+    )
+    assert later.status_code == 201, later.text
+    later_id = later.json()["id"]
+    assert fixture_ids(client, later_id) == ids
+    assert all(n["pinned"] for n in nodes(client, later_id) if n["kind"] == "fixture")
+    feed(client, worker, later_id, wire_batches(ROOM, TABLE_VIEWS, "n"))
+    assert fixture_ids(client, later_id) == ids  # re-observed, not duplicated
+
+
+def test_inspection_attaches_three_children_and_later_moves_keep_their_identity(api):
+    client, worker, _ = api
+    scene_id = discovered(client, worker)
+    ids = fixture_ids(client, scene_id)
+    assert [
+        f["fixture_id"]
+        for f in client.get(f"/v1/scenes/{scene_id}/inspection-queue").json()["fixtures"]
+    ] == sorted(ids.values())
+    world = ROOM.without("mug")
+    for box in FINE:
+        world = world.with_object(box)
+    body = {
+        "fixture_id": ids["table"],
+        "frames": [wire_frame(world, CLOSE_VIEW, "insp-0")],
+        "fixture_verified": True,
+    }
+    response = client.post(f"/v1/scenes/{scene_id}/inspections", json=body)
+    assert response.status_code == 201, response.text
+    capture = response.json()
+    assert capture["outcome"] == "completed" and len(capture["children"]) == 3
+    children = {
+        n["label"]: n
+        for n in nodes(client, scene_id, parent=ids["table"])
+        if n["id"] in capture["children"]
+    }
+    assert sorted(children) == ["book", "bowl", "remote"]
+    ledger = client.get(f"/v1/scenes/{scene_id}/inspections").json()["inspections"]
+    assert [c["capture_id"] for c in ledger] == [capture["capture_id"]]
+    assert ids["table"] not in [
+        f["fixture_id"]
+        for f in client.get(f"/v1/scenes/{scene_id}/inspection-queue").json()["fixtures"]
+    ]
+    moved = world.moved("bowl", (TABLE.center[0] + 0.45, TABLE.center[1] - 0.2, TABLE.top_z + 0.04))
+    feed(
+        client,
+        worker,
+        scene_id,
+        [{"batch_id": "later", "frames": [wire_frame(moved, CLOSE_VIEW, "later-0")]}],
+    )
+    moves = client.get(
+        f"/v1/scenes/{scene_id}/events", params={"type": "move", "track_id": children["bowl"]["id"]}
+    ).json()
+    assert len(moves["events"]) == 1
+    assert [n["id"] for n in nodes(client, scene_id, label="bowl")] == [children["bowl"]["id"]]
+
+
+def test_failed_capture_keeps_the_fixture_queued_for_a_bounded_retry(api):
+    client, worker, _ = api
+    scene_id = discovered(client, worker)
+    table_id = fixture_ids(client, scene_id)["table"]
+    statuses = []
+    for attempt in range(3):
+        body = {"fixture_id": table_id, "frames": [wire_frame(ROOM, AWAY_VIEW, f"away-{attempt}")]}
+        capture = client.post(f"/v1/scenes/{scene_id}/inspections", json=body).json()
+        assert capture["outcome"] == "support_not_visible" and capture["children"] == []
+        statuses.append(capture["status"])
+        queued = [
+            f["fixture_id"]
+            for f in client.get(f"/v1/scenes/{scene_id}/inspection-queue").json()["fixtures"]
+        ]
+        assert (table_id in queued) == (attempt < 2)
+    assert statuses == [None, None, "abandoned"]
+
+
+def test_bad_commands_get_a_clear_4xx_and_change_nothing(api):
+    client, worker, _ = api
+    scene_id = discovered(client, worker)
+    head = client.get(f"/v1/scenes/{scene_id}").json()["head_seq"]
+    mug_id = nodes(client, scene_id, label="mug")[0]["id"]
+    frame = wire_frame(ROOM, CLOSE_VIEW, "bad-0")
+    cases = [
+        (
+            "post",
+            f"/v1/scenes/{scene_id}/inspections",
+            {"fixture_id": "trk-999999", "frames": [frame]},
+            404,
+            "fixture_id",
+        ),
+        (
+            "post",
+            f"/v1/scenes/{scene_id}/inspections",
+            {"fixture_id": mug_id, "frames": [frame]},
+            422,
+            "fixture_id",
+        ),
+        (
+            "post",
+            f"/v1/scenes/{scene_id}/tracks/trk-999999/verification",
+            {"verdict": "confirm", "source": "x"},
+            404,
+            "track_id",
+        ),
+        (
+            "post",
+            f"/v1/scenes/{scene_id}/tracks/{mug_id}/verification",
+            {"verdict": "maybe", "source": "x"},
+            422,
+            "verdict",
+        ),
+        ("get", f"/v1/scenes/{scene_id}/baselines/7", None, 404, None),
+        (
+            "post",
+            "/v1/scenes",
+            {"name": "x", "baseline": {"scene_id": scene_id, "version": 3}},
+            404,
+            None,
+        ),
+    ]
+    bad_scores = wire_frame(ROOM, TABLE_VIEWS[0], "bad-1")
+    bad_scores["detections"][0]["class_scores"] = {"table": "high"}
+    cases.append(
+        (
+            "post",
+            f"/v1/scenes/{scene_id}/batches",
+            {"batch_id": "bad", "frames": [bad_scores]},
+            422,
+            "frames[0].detections[0].class_scores",
+        )
+    )
+    for method, url, body, status, field in cases:
+        response = (
+            getattr(client, method)(url, json=body)
+            if body is not None
+            else getattr(client, method)(url)
+        )
+        assert response.status_code == status, (url, response.text)
+        assert response.headers["content-type"] == "application/problem+json"
+        if field is not None:
+            assert response.json()["field"].startswith(field), response.json()
+    assert client.get(f"/v1/scenes/{scene_id}").json()["head_seq"] == head
+    assert len(client.get("/v1/scenes").json()["scenes"]) == 1
+
+
+def test_inspection_of_an_unconfirmed_fixture_is_a_409(api):
+    client, worker, _ = api
+    scene_id = client.post("/v1/scenes", json={"name": "young"}).json()["id"]
+    feed(client, worker, scene_id, wire_batches(ROOM, TABLE_VIEWS[:1], "y"))
+    table = next(n for n in nodes(client, scene_id, include="all") if n["kind"] == "fixture")
+    assert table["state"] == "tentative"
+    body = {"fixture_id": table["id"], "frames": [wire_frame(ROOM, CLOSE_VIEW, "y-insp")]}
+    response = client.post(f"/v1/scenes/{scene_id}/inspections", json=body)
+    assert response.status_code == 409 and response.json()["field"] == "fixture_id"
