@@ -137,36 +137,28 @@ class Track:
 
     @classmethod
     def from_dict(cls, record: Mapping[str, Any]) -> Track:
-        """Inverse of `to_dict` (whose JSON numbers load back as floats: no per-element coercion)."""
+        """Inverse of `to_dict`, built like `evolved` (snapshots load hundreds of tracks per as_of).
+
+        JSON numbers written by `to_dict` load back as floats: no per-element coercion.
+        """
         embedding_sum = record["embedding_sum"]
         published = record["published_center"]
-        return cls(
-            track_id=record["track_id"],
-            kind=record["kind"],
-            lifecycle=record["lifecycle"],
+        values = dict(record)
+        values.update(
             class_evidence=dict(record["class_evidence"]),
             existence_logodds=float(record["existence_logodds"]),
-            center=_vec3(record["center"]),
-            extent=_vec3(record["extent"]),
+            center=tuple(record["center"]),
+            extent=tuple(record["extent"]),
             recent_centers=tuple(map(tuple, record["recent_centers"])),
             parent_evidence=dict(record["parent_evidence"]),
-            parent=record["parent"],
             embedding_sum=None if embedding_sum is None else tuple(embedding_sum),
-            embedding_count=int(record["embedding_count"]),
-            last_observed=record["last_observed"],
-            last_observed_frame=record["last_observed_frame"],
-            batches_observed=int(record["batches_observed"]),
-            visible_misses=int(record["visible_misses"]),
-            published_center=None if published is None else _vec3(published),
-            pinned=bool(record["pinned"]),
-            verification=record["verification"],
-            verdict_frame=record["verdict_frame"],
-            margin_sum=float(record["margin_sum"]),
-            best_frame=record["best_frame"],
-            best_frame_support=int(record["best_frame_support"]),
-            inspection_status=record["inspection_status"],
-            inspection_attempts=int(record["inspection_attempts"]),
+            published_center=None if published is None else tuple(published),
         )
+        if values.keys() != _TRACK_FIELDS:
+            raise ValueError(f"track record fields differ: {sorted(values.keys() ^ _TRACK_FIELDS)}")
+        track = object.__new__(cls)
+        track.__dict__.update(values)
+        return track
 
 
 _TRACK_FIELDS = frozenset(f.name for f in fields(Track))
