@@ -48,15 +48,22 @@ def wait_until_processed(
 
 
 def print_summary(client: httpx.Client, base_url: str, scene_id: str) -> None:
-    """The live graph, the removals with their reasons, and the links to follow."""
+    """Fixtures with the objects on them, removals and their reasons, verdicts waited for, a baseline."""
     scene = client.get(f"/v1/scenes/{scene_id}").json()
     graph = client.get(f"/v1/scenes/{scene_id}/graph", params={"include": "all"}).json()
     print(f"\nScene {scene_id}: {scene['head_seq']} events in the log.")
-    print(f"{'track':<12} {'label':<8} {'state':<10} {'p_exist':>7}  center [m]")
-    for node in graph["nodes"]:
+    print(
+        f"{'track':<12} {'kind':<8} {'label':<8} {'state':<10} {'p_exist':>7}  {'on':<12} center [m]"
+    )
+    ordered = sorted(
+        graph["nodes"], key=lambda n: (n["kind"] != "fixture", n["parent"] or "", n["id"])
+    )
+    for node in ordered:
         center = ", ".join(f"{v:5.2f}" for v in node["center"])
+        note = " (waits for a verdict)" if node["verification"] == "pending" else ""
         print(
-            f"{node['id']:<12} {node['label']:<8} {node['state']:<10} {node['p_exist']:7.3f}  ({center})"
+            f"{node['id']:<12} {node['kind']:<8} {node['label']:<8} {node['state']:<10} {node['p_exist']:7.3f}  "
+            f"{node['parent'] or '-':<12} ({center}){note}"
         )
     for node in graph["nodes"]:
         if node["state"] == "removed":
@@ -64,12 +71,30 @@ def print_summary(client: httpx.Client, base_url: str, scene_id: str) -> None:
                 "summary"
             ]
             print(f"why: {summary}")
+    for item in client.get(f"/v1/scenes/{scene_id}/verifications").json()["verifications"]:
+        candidates = ", ".join(
+            f"{label} {score:.2f}" for label, score in item["candidates"].items()
+        )
+        print(
+            f"verification pending: {item['track_id']} ({candidates}); crop frame {item['best_frame']}"
+        )
+    frozen = client.post(f"/v1/scenes/{scene_id}/baselines")
+    if frozen.status_code == 201:
+        package = frozen.json()
+        fixtures = ", ".join(
+            f"{f['track_id']} {f['label']}" for f in package["package"]["fixtures"]
+        )
+        print(
+            f"baseline v{package['version']} frozen at seq {package['seq']}: {fixtures}; sha256 {package['sha256'][:16]}..."
+        )
     print("\nWhere to look:")
     print(f"  API docs        {base_url}/docs")
     print(f"  graph now       {base_url}/v1/scenes/{scene_id}/graph")
     print(f"  graph at seq 40 {base_url}/v1/scenes/{scene_id}/graph?as_of=40")
     print(f"  event log       {base_url}/v1/scenes/{scene_id}/events?limit=50")
-    print(f"  tracks (SQL)    {base_url}/v1/scenes/{scene_id}/tracks?state=confirmed")
+    print(f"  verifications   {base_url}/v1/scenes/{scene_id}/verifications")
+    print(f"  baselines       {base_url}/v1/scenes/{scene_id}/baselines")
+    print(f"  to inspect      {base_url}/v1/scenes/{scene_id}/inspection-queue")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -262,3 +262,24 @@ def test_concurrent_migrations_are_serialized(backend, tmp_path, request):
             )
     finally:
         engine.dispose()
+
+
+def test_a_command_is_decided_again_when_the_head_moved(container):
+    """Verdicts and freezes race with the worker: the expected-head append retries on a new head."""
+    from service.commands import run_command
+
+    scene = container.log.create_scene("s", Params())
+    calls = []
+
+    def decide_command(state):
+        calls.append(state.head_seq)
+        if len(calls) == 1:  # somebody appends between our read and our append
+            append_batch(container, scene.id, [added("trk-000001")])
+        return (
+            [missed("trk-000001", 0.3, 1)]
+            if "trk-000001" in state.tracks
+            else [added("trk-000002", 3.0)]
+        )
+
+    _state, events, seqs = run_command(container, scene.id, decide_command)
+    assert calls == [0, 1] and seqs == (2, 2) and events[0].type == "update"
