@@ -23,6 +23,7 @@ class CandidatePool:
     labels: Sequence[str]
     centers: FloatArray  # (n, 3)
     embedding_of: Callable[[int], FloatArray | None]
+    eligible: npt.NDArray[np.bool_] | None = None  # rows that may be matched (None: all)
 
 
 def appearance_agrees(a: FloatArray | None, b: FloatArray | None, min_cosine: float) -> bool:
@@ -42,7 +43,10 @@ def associate(
     pairs: list[tuple[float, str, int]] = []
     for j, proposal in enumerate(proposals):
         distances = np.linalg.norm(pool.centers - proposal.center, axis=1)
-        for i in (int(k) for k in np.flatnonzero(distances < params.max_center_distance_m)):
+        near = distances < params.max_center_distance_m
+        if pool.eligible is not None:
+            near &= pool.eligible
+        for i in (int(k) for k in np.flatnonzero(near)):
             if pool.kinds[i] != proposal.kind or pool.labels[i] != proposal.label:
                 continue  # class agreement
             if not appearance_agrees(
@@ -78,6 +82,8 @@ def _unique_class_fallback(
     free_tracks: dict[tuple[str, str], list[int]] = {}
     for i, track_id in enumerate(pool.track_ids):
         key = (pool.kinds[i], pool.labels[i])
+        if pool.eligible is not None and not pool.eligible[i]:
+            continue
         if key in free_proposals and track_id not in used_tracks:
             free_tracks.setdefault(key, []).append(i)
     recovered: dict[int, str] = {}

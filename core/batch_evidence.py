@@ -13,6 +13,7 @@ from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
 from core.observation import Frame
 from core.params import Params
+from core.rules import PAPER_RULES, UpdateRules
 from core.state import SceneState
 from core.support import SupportSurface, support_of
 from core.transitions import (
@@ -33,6 +34,7 @@ class BatchEvidence:
 
     state: SceneState
     params: Params
+    rules: UpdateRules = PAPER_RULES
     observations: dict[str, list[Proposal]] = field(default_factory=dict)
     fixtures: dict[str, FixtureProposal] = field(default_factory=dict)
     new_track_ids: list[str] = field(default_factory=list)
@@ -58,14 +60,32 @@ class BatchEvidence:
             dtype=bool,
         )
         self._surfaces: list[SupportSurface] | None = None
+        self._eligible: npt.NDArray[np.bool_] | None = None
 
     # -- association pool ---------------------------------------------------------------------
 
     def pool(self) -> CandidatePool:
         """Every track so far, with this batch's latest centers."""
+        eligible = None
+        if self._eligible is not None:  # tracks created in this batch are always eligible
+            extra = len(self._ids) - len(self._eligible)
+            eligible = np.concatenate((self._eligible, np.ones(extra, dtype=np.bool_)))
         return CandidatePool(
-            self._ids, self._kinds, self._labels, self._centers, self._embedding_of
+            self._ids, self._kinds, self._labels, self._centers, self._embedding_of, eligible
         )
+
+    def forget_beyond(self, timestamp: float) -> None:
+        """Without persistent identity: removed and long-unseen tracks cannot be matched."""
+        memory = self.rules.identity_memory_s
+        if memory is None:
+            return
+        horizon = timestamp - memory
+        eligible = []
+        for track_id in self.state.arrays.track_ids:
+            track = self.state.tracks[track_id]
+            seen = track.last_observed
+            eligible.append(track.lifecycle != "removed" and seen is not None and seen >= horizon)
+        self._eligible = np.array(eligible, dtype=np.bool_)
 
     def _embedding_of(self, row: int) -> FloatArray | None:
         if row not in self._embeddings:
@@ -114,7 +134,13 @@ class BatchEvidence:
         arrays = self.state.arrays
         if not arrays.track_ids:
             return
-        passed = samples_passed(arrays.centers, arrays.extents, frame, self.params.visibility)
+        passed = samples_passed(
+            arrays.centers,
+            arrays.extents,
+            frame,
+            self.params.visibility,
+            self.rules.visibility_gate,
+        )
         for row in np.flatnonzero((passed > 0) & self._live_rows):
             track_id = arrays.track_ids[row]
             best = self.visibility.get(track_id)
@@ -184,7 +210,9 @@ class BatchEvidence:
             elif track_id in self.visibility and is_visible(
                 self.visibility[track_id][0], params.visibility
             ):
-                emitted += visible_miss(track, *self.visibility[track_id], params)
+                emitted += visible_miss(
+                    track, *self.visibility[track_id], params, self.rules.removal
+                )
         return emitted
 
     def _parents(self, proposals: list[Proposal]) -> list[str | None]:

@@ -9,13 +9,17 @@ from core.fixture_step import fixture_batch
 from core.geometry import Proposal, ground_detection
 from core.observation import Batch, Frame
 from core.params import Params
+from core.rules import PAPER_RULES, UpdateRules
 from core.state import SceneState
 
 
-def decide(state: SceneState, batch: Batch, params: Params | None = None) -> list[Event]:
+def decide(
+    state: SceneState, batch: Batch, params: Params | None = None, rules: UpdateRules = PAPER_RULES
+) -> list[Event]:
     """Events of one batch; pure and deterministic. `params` defaults to the scene's own."""
     params = params or state.params
-    evidence = BatchEvidence(state, params)
+    evidence = BatchEvidence(state, params, rules)
+    evidence.forget_beyond(batch.frames[0].timestamp)
     # 1. Coarse fixtures: the batch's fixture masks add class evidence to the voxel map, which
     #    is queried against the taxonomy, clustered and associated with fixture tracks (3.2, 3.3).
     fixtures = fixture_batch(state, batch, params)

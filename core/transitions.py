@@ -187,7 +187,9 @@ def _move_events(
     ]
 
 
-def visible_miss(track: Track, samples: int, frame_id: str, params: Params) -> list[Event]:
+def visible_miss(
+    track: Track, samples: int, frame_id: str, params: Params, removal: bool = True
+) -> list[Event]:
     """An unmatched, visible track: one miss (equation (3)), then `demote` / `remove` as they apply."""
     existence, lifecycle_params = params.existence, params.lifecycle
     logodds = update_existence(track.existence_logodds, existence, visible_miss=True)
@@ -203,6 +205,8 @@ def visible_miss(track: Track, samples: int, frame_id: str, params: Params) -> l
     }
     lifecycle = track.lifecycle
     emitted: list[Event] = [TrackUpdated(track.track_id, lifecycle, frame_id, details)]
+    if not removal:  # an append-only memory never resolves a disappearance
+        return emitted
     if not track.pinned and should_demote(
         lifecycle, p_exist, lifecycle_params
     ):  # pinned: never unpublished

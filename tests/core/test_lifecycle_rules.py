@@ -214,3 +214,59 @@ def test_square_erosion_matches_scipy():
         mask = ndimage.binary_dilation(rng.random((30, 40)) > 0.93, iterations=3)
         expected = ndimage.binary_erosion(mask, structure=np.ones((5, 5), bool), border_value=0)
         assert np.array_equal(erode_square(mask, 2), expected)
+
+
+def at_time(batch, seconds):
+    """The batch with its frame stamped at `seconds`."""
+    from dataclasses import replace
+
+    return type(batch)(batch.batch_id, tuple(replace(f, timestamp=seconds) for f in batch.frames))
+
+
+def test_without_the_visibility_gate_an_occluded_object_is_removed():
+    from core.rules import UpdateRules
+
+    rules = UpdateRules(visibility_gate=False)
+    state = SceneState()
+    for i in range(3):
+        state = fold(state, decide(state, scene_batch(f"b{i}", MUG), rules=rules))
+    occluder = ((0.2, 0.1, 1.2), 0.5)
+    for i in range(12):
+        state = fold(
+            state,
+            decide(
+                state, scene_batch(f"o{i}", MUG, detect=set(), occluders=[occluder]), rules=rules
+            ),
+        )
+    assert state.tracks["trk-000001"].lifecycle == "removed"
+
+
+def test_without_persistent_identity_a_returning_object_gets_a_new_identity():
+    from core.rules import UpdateRules
+
+    rules = UpdateRules(identity_memory_s=1.0)
+    state = SceneState()
+    for i in range(3):
+        state = fold(state, decide(state, at_time(scene_batch(f"b{i}", MUG), 0.5 * i), rules=rules))
+    away = look_pose(120.0)
+    state = fold(
+        state, decide(state, at_time(scene_batch("away", {}, pose=away), 2.0), rules=rules)
+    )
+    events = decide(state, at_time(scene_batch("back", MUG), 5.0), rules=rules)
+    assert (events[0].type, events[0].track_id) == ("add", "trk-000002")
+    assert [(e.type, e.details["evidence"]) for e in events[1:]] == [("update", "visible_miss")]
+    # with the paper's rules the same return keeps the identity
+    assert decide(state, at_time(scene_batch("back", MUG), 5.0))[0].track_id == "trk-000001"
+
+
+def test_an_append_only_memory_never_removes():
+    from core.rules import UpdateRules
+
+    rules = UpdateRules(removal=False)
+    state = SceneState()
+    for i in range(3):
+        state = fold(state, decide(state, scene_batch(f"b{i}", MUG), rules=rules))
+    for i in range(15):
+        state = fold(state, decide(state, scene_batch(f"m{i}", MUG, detect=set()), rules=rules))
+    track = state.tracks["trk-000001"]
+    assert track.lifecycle == "confirmed" and track.visible_misses == 15

@@ -1,0 +1,28 @@
+"""Update rules: what decide() does with the evidence. The defaults are PBD-AG's (section 3.3).
+
+Baselines and ablations are other instances of this one object handed to the same loop
+(never `if ablation == ...` in the core). Rules that are plain numbers (confirmation batches,
+miss increments) stay in `Params`; these are the ones that change a mechanism.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class UpdateRules:
+    """The mechanisms decide() applies; each flag names the paper component it switches."""
+
+    # The geometric visibility gate: a box sample must have valid depth in its window and be
+    # unoccluded. Without it, being in range and inside the image is enough for a miss.
+    visibility_gate: bool = True
+    # Persistent identity: removed tracks and long-unseen tracks take part in association.
+    # None keeps every identity forever; a number of seconds forgets tracks unseen for longer,
+    # and removed tracks never come back.
+    identity_memory_s: float | None = None
+    # Removal and demotion at all (append-only memories never resolve a disappearance).
+    removal: bool = True
+
+
+PAPER_RULES = UpdateRules()
