@@ -158,6 +158,9 @@ def _attach_children(
                     "reason": "inspection",
                 },
             )
-            events += [added[0], confirm, *added[1:]]
+            if any(e.type == "confirm" for e in added):  # the params already publish on sight
+                events += added
+            else:
+                events += [added[0], confirm, *added[1:]]
         children.append(track_id)
     return events, children

@@ -103,10 +103,21 @@ def added_object(
         parent_evidence=evidence,
     )
     frame_id = proposals[0].frame_id
-    return [
-        TrackAdded(track_id, "tentative", frame_id, details),
-        *_support_events(track_id, "tentative", frame_id, None, evidence),
-    ]
+    emitted: list[Event] = [TrackAdded(track_id, "tentative", frame_id, details)]
+    lifecycle = "tentative"
+    p_exist = logistic(logodds)
+    if should_confirm(lifecycle, p_exist, 1, params.lifecycle):  # only when one batch may publish
+        lifecycle = "confirmed"
+        center = _vec(proposals[-1].center)
+        emitted.append(
+            TrackConfirmed(
+                track_id,
+                lifecycle,
+                frame_id,
+                {"p_exist": p_exist, "center": center, "batches_observed": 1},
+            )
+        )
+    return [*emitted, *_support_events(track_id, lifecycle, frame_id, None, evidence)]
 
 
 def _parent_evidence(

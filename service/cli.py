@@ -8,6 +8,7 @@ import logging
 import signal
 import sys
 import threading
+from importlib.metadata import entry_points
 from pathlib import Path
 
 from service.settings import Settings
@@ -44,7 +45,14 @@ def main(argv: list[str] | None = None) -> int:
     openapi = commands.add_parser("openapi", help="write the OpenAPI document")
     openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
 
+    for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from bench
+        try:
+            entry_point.load()(commands)
+        except Exception as error:  # a broken plugin must not take the service's commands down
+            print(f"pbdag: command {entry_point.name!r} unavailable: {error}", file=sys.stderr)
     args = parser.parse_args(argv)
+    if hasattr(args, "handler"):
+        return int(args.handler(args))
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
