@@ -34,10 +34,8 @@ def free_port(preferred: int) -> int:
     raise RuntimeError("no free port")
 
 
-def wait_until_processed(
-    client: httpx.Client, scene_id: str, batches: int, timeout: float = 300.0
-) -> None:
-    """Block until the scene's batches are all done (or dead)."""
+def wait_until_processed(client: httpx.Client, scene_id: str, timeout: float = 300.0) -> None:
+    """Block until no batch is queued, running or waiting for a retry."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         counts = client.get("/healthz").json()["batches"]
