@@ -17,6 +17,7 @@ from core.fixtures import (
 from core.observation import Batch
 from core.params import Params
 from core.state import SceneState
+from core.voxels import unpack
 
 
 @dataclass
@@ -59,17 +60,17 @@ def fixture_batch(state: SceneState, batch: Batch, params: Params) -> FixtureBat
                 {
                     "frame_id": e.frame_id,
                     "class_scores": list(e.class_scores),
-                    "voxels": e.voxels.ravel().tolist(),
+                    "voxels": unpack(e.voxels).ravel().tolist(),
                 }
                 for e in evidence
             ]
         },
     )
     # Query the whole accumulated map against the taxonomy, then cluster each class.
-    keys, counts, sums, covered = merged_voxels(state.voxels, evidence)
+    keys, counts, sums = merged_voxels(state.voxel_arrays, evidence)
     kept, scores, margins = kept_voxels(counts, sums, fixture_params)
     proposals = fixture_proposals(
-        keys, counts, sums, kept, scores, margins, covered, fixture_params
+        keys, counts, sums, kept, scores, margins, evidence, fixture_params
     )
     tracks = [
         FixtureTrackView(t.track_id, t.label, t.center, t.extent)

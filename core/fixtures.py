@@ -8,7 +8,7 @@ cluster attaches to an already matched fixture).
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -20,7 +20,7 @@ from scipy.spatial import cKDTree
 from core.geometry import backproject_pixels, camera_to_world
 from core.observation import Detection, Frame
 from core.params import FixtureParams
-from core.state import VoxelKey
+from core.voxels import pack, unpack
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
@@ -33,7 +33,7 @@ class VoxelEvidence:
 
     frame_id: str
     class_scores: tuple[float, ...]  # in taxonomy order
-    voxels: IntArray  # (n, 3) unique voxel keys
+    voxels: IntArray  # (n,) unique packed voxel keys
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,8 +75,12 @@ def voxel_evidence(
     min_range_m: float,
     max_range_m: float,
 ) -> VoxelEvidence | None:
-    """Back-project a fixture mask's valid depth into unique voxel keys."""
+    """Back-project a fixture mask's valid depth (every `mask_pixel_stride`-th pixel) into voxels."""
     flat_index = np.flatnonzero(detection.mask)
+    stride = params.mask_pixel_stride
+    if stride > 1:
+        rows, cols = np.divmod(flat_index, frame.intrinsics.width)
+        flat_index = flat_index[(rows % stride == 0) & (cols % stride == 0)]
     depth_m = frame.depth.reshape(-1)[flat_index].astype(np.float64)
     valid = (depth_m >= min_range_m) & (depth_m <= max_range_m)
     if not valid.any():
@@ -84,33 +88,28 @@ def voxel_evidence(
     points = camera_to_world(
         backproject_pixels(flat_index[valid], depth_m[valid], frame.intrinsics), frame.pose
     )
-    keys = np.unique(np.floor(points / params.voxel_size_m).astype(np.int64), axis=0)
-    return VoxelEvidence(frame.frame_id, class_vector(detection, params.taxonomy), keys)
+    packed = np.unique(pack(np.floor(points / params.voxel_size_m).astype(np.int64)))
+    return VoxelEvidence(frame.frame_id, class_vector(detection, params.taxonomy), packed)
 
 
 def merged_voxels(
-    voxels: Mapping[VoxelKey, tuple[int, tuple[float, ...]]], batch: Sequence[VoxelEvidence]
-) -> tuple[IntArray, IntArray, FloatArray, dict[VoxelKey, dict[str, int]]]:
-    """Arrays (keys, counts, score sums) of the map with the batch's evidence added.
-
-    Also returns, per voxel the batch covered, how many of its voxels each frame covered.
-    """
-    updated: dict[VoxelKey, tuple[int, tuple[float, ...]]] = {}
-    covered: dict[VoxelKey, dict[str, int]] = {}
-    for evidence in batch:
-        scores = evidence.class_scores
-        for key in map(tuple, evidence.voxels.tolist()):
-            count, totals = updated.get(key) or voxels.get(key) or (0, (0.0,) * len(scores))
-            updated[key] = (count + 1, tuple(a + b for a, b in zip(totals, scores, strict=True)))
-            frames = covered.setdefault(key, {})
-            frames[evidence.frame_id] = frames.get(evidence.frame_id, 0) + 1
-    merged = {**voxels, **updated}
-    if not merged:
-        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64), np.zeros((0, 0)), covered
-    keys = np.array(list(merged.keys()), dtype=np.int64)
-    counts = np.array([value[0] for value in merged.values()], dtype=np.int64)
-    sums = np.array([value[1] for value in merged.values()], dtype=np.float64)
-    return keys, counts, sums, covered
+    base: tuple[IntArray, IntArray, FloatArray], batch: Sequence[VoxelEvidence]
+) -> tuple[IntArray, IntArray, FloatArray]:
+    """The map (sorted packed keys, counts, score sums) with the batch's evidence added."""
+    base_keys, base_counts, base_sums = base
+    width = len(batch[0].class_scores) if batch else base_sums.shape[1]
+    batch_keys = np.concatenate([e.voxels for e in batch]) if batch else np.zeros(0, np.int64)
+    batch_sums = (
+        np.concatenate([np.tile(np.asarray(e.class_scores), (len(e.voxels), 1)) for e in batch])
+        if batch
+        else np.zeros((0, width))
+    )
+    keys, inverse = np.unique(np.concatenate((base_keys, batch_keys)), return_inverse=True)
+    counts = np.zeros(len(keys), np.int64)
+    np.add.at(counts, inverse, np.concatenate((base_counts, np.ones(len(batch_keys), np.int64))))
+    sums = np.zeros((len(keys), width))
+    np.add.at(sums, inverse, np.concatenate((base_sums.reshape(-1, width), batch_sums)))
+    return keys, counts, sums
 
 
 def kept_voxels(
@@ -170,29 +169,35 @@ def fixture_proposals(
     kept: IntArray,
     scores: FloatArray,
     margins: FloatArray,
-    covered: Mapping[VoxelKey, Mapping[str, int]],
+    batch: Sequence[VoxelEvidence],
     params: FixtureParams,
 ) -> list[FixtureProposal]:
-    """Same-class DBSCAN clusters of kept voxels that pass the class's size limits."""
+    """Same-class DBSCAN clusters of kept voxels (packed `keys`) that pass the class's size limits."""
     proposals: list[FixtureProposal] = []
     size = params.voxel_size_m
+    covered = (
+        np.unique(np.concatenate([e.voxels for e in batch])) if batch else np.zeros(0, np.int64)
+    )
     for class_index, label in enumerate(params.taxonomy):
         members = np.flatnonzero(kept == class_index)
         if members.size == 0:
             continue
-        centers = ((keys[members] + 0.5) * size).astype(np.float64)
+        centers = ((unpack(keys[members]) + 0.5) * size).astype(np.float64)
         cluster_of = dbscan(centers, params.dbscan_eps_m, params.dbscan_min_points)
         for cluster in np.unique(cluster_of[cluster_of >= 0]):
             inside = members[cluster_of == cluster]
-            points = (keys[inside] + 0.5) * size
+            points = centers[cluster_of == cluster]
             low, high = points.min(axis=0) - size / 2, points.max(axis=0) + size / 2
             extent = high - low
             if not plausible(label, extent, params):
                 continue
+            cluster_keys = keys[inside]
+            # The batch frame that covered most of the cluster: the one to crop for a verifier.
             frames: dict[str, int] = {}
-            for key in map(tuple, keys[inside].tolist()):
-                for frame_id, n in covered.get(key, {}).items():
-                    frames[frame_id] = frames.get(frame_id, 0) + n
+            for evidence in batch:
+                hits = int(np.isin(evidence.voxels, cluster_keys, assume_unique=True).sum())
+                if hits:
+                    frames[evidence.frame_id] = frames.get(evidence.frame_id, 0) + hits
             best_frame = (
                 min(frames.items(), key=lambda item: (-item[1], item[0]))[0] if frames else None
             )
@@ -205,9 +210,7 @@ def fixture_proposals(
                     voxel_count=int(inside.size),
                     margin=float(margins[inside].mean()),
                     mean_score=float(scores[inside].mean()),
-                    contributed=int(
-                        sum(1 for key in map(tuple, keys[inside].tolist()) if key in covered)
-                    ),
+                    contributed=int(np.isin(cluster_keys, covered, assume_unique=True).sum()),
                     best_frame=best_frame,
                     class_means={
                         name: float(value)

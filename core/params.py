@@ -110,6 +110,9 @@ class FixtureParams:
     # Only these classes enter the inspection queue Q_t (section 3.4, T_insp).
     inspection_taxonomy: tuple[str, ...] = ("table", "desk", "counter", "shelf")
     voxel_size_m: float = 0.05
+    # Every 4th pixel of a fixture mask in each direction: at 6 m that is 4.6 cm, still inside
+    # one 5 cm voxel, and it makes the map 16 times cheaper to feed.
+    mask_pixel_stride: int = 4
     # A voxel is kept for class c when its mean similarity to c reaches the threshold of c and
     # beats every competing class by the margin.
     default_class_threshold: float = 0.40

@@ -12,6 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.params import Params
+from core.voxels import pack
 
 Vec3 = tuple[float, float, float]
 SNAPSHOT_FORMAT_VERSION = 2
@@ -202,6 +203,23 @@ class SceneState:
     voxels: Mapping[VoxelKey, tuple[int, tuple[float, ...]]] = field(default_factory=dict)
     baselines: tuple[BaselineRecord, ...] = ()
     source_baseline: Mapping[str, Any] | None = None  # the package this session started from
+
+    @cached_property
+    def voxel_arrays(
+        self,
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.float64]]:
+        """The voxel map as sorted packed keys, counts and class-score sums (built once per state)."""
+        if not self.voxels:
+            width = len(self.params.fixtures.taxonomy)
+            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, width))
+        keys = np.array(list(self.voxels.keys()), dtype=np.int64)
+        packed = pack(keys)
+        order = np.argsort(packed)
+        counts = np.fromiter(
+            (value[0] for value in self.voxels.values()), dtype=np.int64, count=len(self.voxels)
+        )
+        sums = np.array([value[1] for value in self.voxels.values()], dtype=np.float64)
+        return packed[order], counts[order], sums[order]
 
     @cached_property
     def arrays(self) -> TrackArrays:
