@@ -51,6 +51,7 @@ class World:
     fixtures: tuple[Box, ...]
     objects: tuple[Box, ...]
     occluders: tuple[Box, ...] = ()
+    include_room: bool = True  # False for recorded backgrounds, whose real depth is the room
 
     def object_index(self, object_id: str) -> int:
         """Position of an object in `objects` (the value the instance map uses)."""
@@ -153,9 +154,9 @@ def build_scene(world: World) -> SceneGeometry:
     """Raycast scene of the room and every box; cached because worlds repeat frame after frame."""
     scene = o3d.t.geometry.RaycastingScene()
     # Triangles are two-sided for the raycaster, so the room box needs no inward-facing winding.
-    placed: list[tuple[int, Box | None, str, int]] = [
-        (_add_box(scene, box_corners(_room_box(world))), None, "room", -1)
-    ]
+    placed: list[tuple[int, Box | None, str, int]] = []
+    if world.include_room:
+        placed.append((_add_box(scene, box_corners(_room_box(world))), None, "room", -1))
     for group, boxes in (
         ("fixture", world.fixtures),
         ("object", world.objects),
@@ -165,7 +166,8 @@ def build_scene(world: World) -> SceneGeometry:
             (_add_box(scene, box_corners(box)), box, group, index)
             for index, box in enumerate(boxes)
         )
-    lookup_size = max(geometry_id for geometry_id, *_ in placed) + 1
+    # At least one slot: render gathers misses through slot 0 even when the scene is empty.
+    lookup_size = max((geometry_id for geometry_id, *_ in placed), default=0) + 1
     object_lookup = np.full(lookup_size, -1, dtype=np.int32)
     fixture_lookup = np.full(lookup_size, -1, dtype=np.int32)
     for geometry_id, _, group, index in placed:
