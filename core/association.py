@@ -24,6 +24,9 @@ class CandidatePool:
     centers: FloatArray  # (n, 3)
     embedding_of: Callable[[int], FloatArray | None]
     eligible: npt.NDArray[np.bool_] | None = None  # rows that may be matched (None: all)
+    # Rows whose identity was ever published: only those are recovered by the fallback, so a
+    # retired false positive of the same class cannot make a moved object's class look shared.
+    recoverable: npt.NDArray[np.bool_] | None = None
 
 
 def appearance_agrees(a: FloatArray | None, b: FloatArray | None, min_cosine: float) -> bool:
@@ -83,6 +86,8 @@ def _unique_class_fallback(
     for i, track_id in enumerate(pool.track_ids):
         key = (pool.kinds[i], pool.labels[i])
         if pool.eligible is not None and not pool.eligible[i]:
+            continue
+        if pool.recoverable is not None and not pool.recoverable[i]:
             continue
         if key in free_proposals and track_id not in used_tracks:
             free_tracks.setdefault(key, []).append(i)

@@ -61,6 +61,9 @@ class BatchEvidence:
         )
         self._surfaces: list[SupportSurface] | None = None
         self._eligible: npt.NDArray[np.bool_] | None = None
+        self._published = np.array(
+            [tracks[i].published_center is not None for i in self._ids], dtype=np.bool_
+        )
 
     # -- association pool ---------------------------------------------------------------------
 
@@ -70,8 +73,16 @@ class BatchEvidence:
         if self._eligible is not None:  # tracks created in this batch are always eligible
             extra = len(self._ids) - len(self._eligible)
             eligible = np.concatenate((self._eligible, np.ones(extra, dtype=np.bool_)))
+        recoverable = np.zeros(len(self._ids), dtype=np.bool_)
+        recoverable[: len(self._published)] = self._published
         return CandidatePool(
-            self._ids, self._kinds, self._labels, self._centers, self._embedding_of, eligible
+            self._ids,
+            self._kinds,
+            self._labels,
+            self._centers,
+            self._embedding_of,
+            eligible,
+            recoverable,
         )
 
     def forget_beyond(self, timestamp: float) -> None:
