@@ -27,7 +27,9 @@ __all__ = [
 SIXTEEN_BIT_PNG_MODES = frozenset({"I;16", "I;16B", "I"})
 # Tolerances of the rigid-pose check: float32 round trips on the client stay well inside them.
 POSE_LAST_ROW_ATOL = 1e-6
-ROTATION_ATOL = 1e-4
+# Real pose sources (SLAM, 7-Scenes ground truth) drift from orthonormal by ~1e-4; a scale or
+# shear error is orders of magnitude larger.
+ROTATION_ATOL = 1e-3
 
 
 class InvalidObservation(Exception):
