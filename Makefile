@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo serve test lint format openapi bench clean
+.PHONY: setup demo serve test lint format openapi bench eval clean
 
 setup: $(VENV)/.installed
 
@@ -41,6 +41,10 @@ bench: setup  ## the performance benchmarks (figures printed and written to benc
 	$(BIN)/python -m bench.bench_decide
 	$(BIN)/python -m bench.bench_store append --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
+
+eval: setup  ## the paper's protocols on every shipped scenario, seeds 7 17 27 (about 20 minutes)
+	$(BIN)/pbdag eval dynamic --out bench/results/dynamic
+	$(BIN)/pbdag eval fixtures --out bench/results/fixtures
 
 clean:
 	rm -rf $(VENV) data bench/results .pytest_cache .mypy_cache .ruff_cache

@@ -93,6 +93,10 @@ class Recorder:
         self.events.extend(events)
         self.last = nodes
 
+    def result(self, seconds: float) -> MethodRun:
+        """What the method produced."""
+        return MethodRun(tuple(self.predictions), tuple(self.events), self.last, seconds)
+
 
 def stamp(frame: int, events: Sequence[Event], prefix: str = "") -> list[MethodEvent]:
     """Core events as method events at a frame (track ids prefixed per remap epoch)."""
@@ -145,12 +149,7 @@ def run_in_process(
             recorder.batch(last_frame, nodes_of(state, prefix), stamp(last_frame, events, prefix))
         if on_batch is not None:
             on_batch()
-    return MethodRun(
-        tuple(recorder.predictions),
-        tuple(recorder.events),
-        recorder.last,
-        time.perf_counter() - started,
-    )
+    return recorder.result(time.perf_counter() - started)
 
 
 def run_via_service(
@@ -198,12 +197,7 @@ def run_via_service(
         recorder.batch(last_frame, nodes, events)
         if on_batch is not None:
             on_batch()
-    return MethodRun(
-        tuple(recorder.predictions),
-        tuple(recorder.events),
-        recorder.last,
-        time.perf_counter() - started,
-    )
+    return recorder.result(time.perf_counter() - started)
 
 
 def _wait_done(

@@ -16,6 +16,13 @@ from core.rules import PAPER_RULES, UpdateRules
 IMMEDIATE = {"confirm_min_batches": 1, "confirm_min_p_exist": 0.5}
 FOREVER = 1.0e12  # an identity memory that only forgets removed tracks
 NO_SIZE_LIMIT = (0.0, 0.0, 0.0, 100.0, 100.0, 100.0)
+# Fixtures published on first sight: no consensus gate, no absorption of residual clusters.
+UNVERIFIED_FIXTURES = {
+    "confirm_min_batches": 1,
+    "consensus_min_agreement": 0.0,
+    "consensus_min_margin": 0.0,
+    "residual_containment": 2.0,
+}
 
 
 @dataclass(frozen=True)
@@ -114,12 +121,7 @@ FIXTURE_METHODS: tuple[Method, ...] = (
         "The same proposals, but published on first sight without the consensus gate and without "
         "absorbing residual clusters. It isolates immediate, unverified coarse updates.",
         params={
-            "fixtures": {
-                "confirm_min_batches": 1,
-                "consensus_min_agreement": 0.0,
-                "consensus_min_margin": 0.0,
-                "residual_containment": 2.0,
-            },
+            "fixtures": UNVERIFIED_FIXTURES,
             "lifecycle": IMMEDIATE,
         },
     ),
@@ -129,10 +131,7 @@ FIXTURE_METHODS: tuple[Method, ...] = (
         "or consensus. It isolates geometric merging of open-vocabulary segments.",
         params={
             "fixtures": {
-                "confirm_min_batches": 1,
-                "consensus_min_agreement": 0.0,
-                "consensus_min_margin": 0.0,
-                "residual_containment": 2.0,
+                **UNVERIFIED_FIXTURES,
                 "min_expanded_coverage": 2.0,
                 "default_size_limits": list(NO_SIZE_LIMIT),
                 "size_limits": {

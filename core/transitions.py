@@ -135,15 +135,8 @@ def observed_object(
 ) -> list[Event]:
     """A positive batch: `update`, then `confirm`, `move` and `reparent` as they apply."""
     frame_id = proposals[-1].frame_id
-    existence, lifecycle_params = params.existence, params.lifecycle
-    # A removed track that is re-acquired keeps its identity and restarts as a hypothesis.
-    reacquired = track.lifecycle == "removed"
-    logodds = update_existence(
-        existence.prior_logodds if reacquired else track.existence_logodds, existence, observed=True
-    )
-    p_exist = logistic(logodds)
-    batches = 1 if reacquired else track.batches_observed + 1
-    lifecycle = "tentative" if reacquired else track.lifecycle
+    lifecycle_params = params.lifecycle
+    reacquired, logodds, p_exist, batches, lifecycle = positive_batch(track, params)
     center: Vec3 = (
         float(proposals[-1].center[0]),
         float(proposals[-1].center[1]),
@@ -174,6 +167,25 @@ def observed_object(
     emitted.extend(_move_events(track, lifecycle, frame_id, center, params))
     emitted.extend(_support_events(track.track_id, lifecycle, frame_id, track.parent, evidence))
     return emitted
+
+
+def positive_batch(track: Track, params: Params) -> tuple[bool, float, float, int, str]:
+    """Equation (3) for a matched track: (re-acquired, log-odds, p_exist, batches, lifecycle).
+
+    A removed track that is re-acquired keeps its identity and restarts as a hypothesis.
+    """
+    existence = params.existence
+    reacquired = track.lifecycle == "removed"
+    prior = existence.prior_logodds if reacquired else track.existence_logodds
+    logodds = update_existence(prior, existence, observed=True)
+    batches = 1 if reacquired else track.batches_observed + 1
+    return (
+        reacquired,
+        logodds,
+        logistic(logodds),
+        batches,
+        "tentative" if reacquired else track.lifecycle,
+    )
 
 
 def _move_events(
@@ -283,14 +295,7 @@ def observed_fixture(
     """Support from one more batch: `update`, then promotion or a verification request."""
     if track.verification == "rejected":
         return []  # a retired hypothesis explains its cluster and stays retired
-    existence = params.existence
-    reacquired = track.lifecycle == "removed"
-    logodds = update_existence(
-        existence.prior_logodds if reacquired else track.existence_logodds, existence, observed=True
-    )
-    p_exist = logistic(logodds)
-    batches = 1 if reacquired else track.batches_observed + 1
-    lifecycle = "tentative" if reacquired else track.lifecycle
+    reacquired, logodds, p_exist, batches, lifecycle = positive_batch(track, params)
     center = (
         (float(proposal.center[0]), float(proposal.center[1]), float(proposal.center[2]))
         if reacquired
