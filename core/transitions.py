@@ -88,20 +88,25 @@ def _support_events(
     ]
 
 
+def first_sighting(kind: str, params: Params) -> dict[str, Any]:
+    """Existence of a new hypothesis: the prior plus one positive observation (equation (3))."""
+    logodds = update_existence(params.existence.prior_logodds, params.existence, observed=True)
+    return {
+        "kind": kind,
+        "existence_logodds": logodds,
+        "p_exist": logistic(logodds),
+        "batches_observed": 1,
+    }
+
+
 def added_object(
     track_id: str, proposals: Sequence[Proposal], parents: Sequence[str | None], params: Params
 ) -> list[Event]:
     """A new hypothesis (`add`), and its first support."""
-    logodds = update_existence(params.existence.prior_logodds, params.existence, observed=True)
     evidence = _parent_evidence({}, parents, params)
     details = object_details(None, proposals, parents)
-    details.update(
-        kind="object",
-        existence_logodds=logodds,
-        p_exist=logistic(logodds),
-        batches_observed=1,
-        parent_evidence=evidence,
-    )
+    details.update(first_sighting("object", params), parent_evidence=evidence)
+    logodds = details["existence_logodds"]
     frame_id = proposals[0].frame_id
     emitted: list[Event] = [TrackAdded(track_id, "tentative", frame_id, details)]
     lifecycle = "tentative"
@@ -276,16 +281,9 @@ def added_fixture(
     track_id: str, proposal: FixtureProposal, batch_frame: str, timestamp: float, params: Params
 ) -> list[Event]:
     """A new coarse fixture hypothesis."""
-    logodds = update_existence(params.existence.prior_logodds, params.existence, observed=True)
     center: Vec3 = (float(proposal.center[0]), float(proposal.center[1]), float(proposal.center[2]))
     details = fixture_details(proposal, center, batch_frame)
-    details.update(
-        kind="fixture",
-        existence_logodds=logodds,
-        p_exist=logistic(logodds),
-        batches_observed=1,
-        timestamp=timestamp,
-    )
+    details.update(first_sighting("fixture", params), timestamp=timestamp)
     return [TrackAdded(track_id, "tentative", proposal.best_frame or batch_frame, details)]
 
 
