@@ -60,6 +60,19 @@ def methods_in_order(rows: Sequence[dict[str, Any]]) -> list[str]:
     return list(dict.fromkeys(row["method"] for row in rows))
 
 
+def pooled(
+    rows: Sequence[dict[str, Any]], method: str, numerator: str, denominator: str
+) -> tuple[int, int]:
+    """A method's counts summed over its runs (event recall and false absence are pooled)."""
+    mine = [r for r in rows if r["method"] == method]
+    return sum(r[numerator] for r in mine), sum(r[denominator] for r in mine)
+
+
+def ratio_of(counts: tuple[int, int]) -> float:
+    """numerator / denominator, 0 when there is nothing to count."""
+    return counts[0] / counts[1] if counts[1] else 0.0
+
+
 def table(protocol: str, rows: Sequence[dict[str, Any]]) -> str:
     """The paper's table layout: one row per method, mean ± sample std over scenario-seed runs."""
     if protocol == "dynamic":
@@ -67,14 +80,13 @@ def table(protocol: str, rows: Sequence[dict[str, Any]]) -> str:
         lines = []
         for method in methods_in_order(rows):
             mine = [r for r in rows if r["method"] == method]
-            recalled = sum(r["events_recalled"] for r in mine)
-            total = sum(r["events_total"] for r in mine)
-            absent = sum(r["false_absent_checkpoints"] for r in mine)
-            eligible = sum(r["eligible_checkpoints"] for r in mine)
-            pooled = absent / eligible if eligible else 0.0
+            recalled, total = pooled(rows, method, "events_recalled", "events_total")
+            absence = ratio_of(
+                pooled(rows, method, "false_absent_checkpoints", "eligible_checkpoints")
+            )
             cells = [cell([r[key] for r in mine]) for key, _ in DYNAMIC_COLUMNS]
             lines.append(
-                f"| {method} | {' | '.join(cells)} | {recalled}/{total} | {_short(pooled)} |"
+                f"| {method} | {' | '.join(cells)} | {recalled}/{total} | {_short(absence)} |"
             )
         return header + "\n".join(lines) + "\n"
     header = (
@@ -111,11 +123,7 @@ def figures(protocol: str, rows: Sequence[dict[str, Any]], out: Path) -> list[Pa
     written = []
     if protocol == "dynamic":
         idf1 = [mean_std([r["idf1"] for r in rows if r["method"] == m])[0] for m in methods]
-        recall = [
-            sum(r["events_recalled"] for r in rows if r["method"] == m)
-            / max(1, sum(r["events_total"] for r in rows if r["method"] == m))
-            for m in methods
-        ]
+        recall = [ratio_of(pooled(rows, m, "events_recalled", "events_total")) for m in methods]
         written.append(
             _bars(
                 out / "idf1_event_recall.png",
@@ -125,8 +133,7 @@ def figures(protocol: str, rows: Sequence[dict[str, Any]], out: Path) -> list[Pa
             )
         )
         absence = [
-            sum(r["false_absent_checkpoints"] for r in rows if r["method"] == m)
-            / max(1, sum(r["eligible_checkpoints"] for r in rows if r["method"] == m))
+            ratio_of(pooled(rows, m, "false_absent_checkpoints", "eligible_checkpoints"))
             for m in methods
         ]
         written.append(

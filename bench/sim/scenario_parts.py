@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 from bench.sim.camera import CameraModel
@@ -25,31 +25,14 @@ EVENT_TYPES = ("appear", "move", "disappear", "transfer")
 
 
 @dataclass(frozen=True)
-class CameraSpec:
-    """Intrinsics, depth range and the eye height synthetic trajectories walk at."""
+class CameraSpec(CameraModel):
+    """The renderer's camera plus the eye height synthetic trajectories walk at."""
 
-    width: int = 640
-    height: int = 480
-    fx: float = 525.0
-    fy: float = 525.0
-    cx: float = 319.5
-    cy: float = 239.5
     eye_height: float = 1.2
-    min_depth: float = 0.3
-    max_depth: float = 6.0
 
     def model(self) -> CameraModel:
-        """The renderer's camera model."""
-        return CameraModel(
-            self.width,
-            self.height,
-            self.fx,
-            self.fy,
-            self.cx,
-            self.cy,
-            self.min_depth,
-            self.max_depth,
-        )
+        """The renderer's camera model alone (what frames carry and runs save)."""
+        return CameraModel(**{f.name: getattr(self, f.name) for f in fields(CameraModel)})
 
 
 def parse_camera(value: Any, where: str) -> CameraSpec:
