@@ -14,7 +14,12 @@ def run_migrations() -> None:
     """Online migrations on `config.attributes["connection"]`, or on the configured URL."""
     connection = context.config.attributes.get("connection")
     if connection is not None:
-        context.configure(connection=connection, target_metadata=target_metadata)
+        # One transaction around every pending migration: on SQLite (whose DDL alembic treats as
+        # non-transactional, committing after each revision) the version read and all upgrades
+        # then happen under one BEGIN IMMEDIATE, so concurrent `pbdag migrate`s cannot interleave.
+        context.configure(
+            connection=connection, target_metadata=target_metadata, transactional_ddl=True
+        )
         with context.begin_transaction():
             context.run_migrations()
         return
