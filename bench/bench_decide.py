@@ -15,7 +15,7 @@ from bench.sim.detector import detect
 from bench.sim.render import add_kinect_noise, render
 from bench.sim.world import Box, World, object_on
 from core.decide import decide
-from core.events import TrackAdded
+from core.events import ObjectAdded, Observation
 from core.evolve import fold
 from core.observation import Batch, Detection, Frame, Intrinsics
 from core.state import SceneState
@@ -67,30 +67,28 @@ def state_with_500_tracks(frame: Frame, seed: int) -> SceneState:
     for k in range(480):
         center = rng.uniform([0.2, 0.2, 0.1], [7.8, 5.8, 2.0])
         extra.append(
-            TrackAdded(
-                f"trk-{state.next_track_number + k:06d}",
-                "tentative",
-                "x",
-                {
-                    "kind": "object",
-                    "observations": [
-                        {
-                            "frame_id": "x",
-                            "label": LABELS[k % len(LABELS)],
-                            "score": 0.9,
-                            "center": [float(v) for v in center],
-                            "extent": [0.1, 0.1, 0.1],
-                            "valid_pixels": 500,
-                            "parent": None,
-                        }
-                    ],
-                    "embedding_sum": [float(v) for v in rng.normal(size=64)],
-                    "embedding_count": 1,
-                    "timestamp": 0.0,
-                    "existence_logodds": 1.0,
-                    "p_exist": 0.73,
-                    "batches_observed": 1,
-                },
+            ObjectAdded(
+                track_id=f"trk-{state.next_track_number + k:06d}",
+                state="tentative",
+                frame_id="x",
+                observations=(
+                    Observation(
+                        frame_id="x",
+                        label=LABELS[k % len(LABELS)],
+                        score=0.9,
+                        center=(float(center[0]), float(center[1]), float(center[2])),
+                        extent=(0.1, 0.1, 0.1),
+                        valid_pixels=500,
+                        parent=None,
+                    ),
+                ),
+                embedding_sum=tuple(float(v) for v in rng.normal(size=64)),
+                embedding_count=1,
+                timestamp=0.0,
+                existence_logodds=1.0,
+                p_exist=0.73,
+                batches_observed=1,
+                parent_evidence={},
             )
         )
     return fold(state, extra)

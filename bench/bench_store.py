@@ -29,7 +29,7 @@ from bench.perf_common import synthetic_events, write_results
 from core.evolve import fold
 from core.params import Params
 from service.store.engine import make_engine, migrate, write_transaction
-from service.store.event_log import EventLog, snapshot_due
+from service.store.event_log import EventLog, SceneRecord, snapshot_due
 
 
 @contextmanager
@@ -57,6 +57,12 @@ def engines(postgres_url: str | None) -> Iterator[list[tuple[str, sa.Engine]]]:
             if postgres_url:
                 with sa.create_engine(postgres_url).begin() as connection:
                     connection.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
+
+
+def new_scene(log: EventLog) -> SceneRecord:
+    """An empty scene with the default parameters."""
+    with write_transaction(log.engine) as connection:
+        return log.insert_scene(connection, "bench", Params())[0]
 
 
 def append_all(
@@ -99,7 +105,7 @@ def bench_append(args: argparse.Namespace) -> None:
     with engines(args.postgres) as built:
         for name, engine in built:
             log = EventLog(engine)
-            scene = log.create_scene("bench", Params())
+            scene = new_scene(log)
             seconds = append_all(log, scene.id, args.events, args.batch)
             rate = args.events / seconds
             results[name] = {"seconds": seconds, "events_per_s": rate}
@@ -116,7 +122,7 @@ def bench_as_of(args: argparse.Namespace) -> None:
     with engines(args.postgres) as built:
         for name, engine in built:
             log = EventLog(engine)
-            scene = log.create_scene("bench", Params())
+            scene = new_scene(log)
             print(
                 f"{name}: writing {args.events:,} events with a snapshot every {args.snapshot_interval} ..."
             )

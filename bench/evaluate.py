@@ -17,7 +17,7 @@ from api_schema import BatchIn
 from bench.methods import Method
 from bench.truth import FramePrediction, MethodEvent, PredictedNode
 from core.decide import decide
-from core.events import Event, SceneCreated
+from core.events import Event, SceneCreated, Sighting, TrackReparented
 from core.evolve import evolve, fold
 from core.graph import is_published
 from core.params import Params
@@ -104,8 +104,8 @@ def stamp(frame: int, events: Sequence[Event], prefix: str = "") -> list[MethodE
     for event in events:
         if event.track_id is None:
             continue
-        details = dict(event.details)
-        if event.type == "reparent":
+        details = event.details()
+        if isinstance(event, TrackReparented):
             details = {k: None if v is None else prefix + v for k, v in details.items()}
         stamped.append(MethodEvent(frame, event.type, prefix + event.track_id, details))
     return stamped
@@ -117,7 +117,7 @@ def run_in_process(
     """The method's rules on the shared loop: decode like the service, decide, fold, publish."""
     started = time.perf_counter()
     params = Params.from_dict(method.params)
-    created = SceneCreated(None, None, None, {"name": method.name, "params": params.to_dict()})
+    created = SceneCreated(name=method.name, params=params.to_dict())
     fresh = evolve(SceneState(), created)
     state, epoch, epoch_start = fresh, 0, 0
     n_frames = batches[-1][0] + 1 if batches else 0
@@ -138,12 +138,8 @@ def run_in_process(
         events = decide(state, batch, params, method.rules)
         state = fold(state, events)
         if method.publish_last_batch_only:
-            observed = {
-                e.track_id
-                for e in events
-                if e.type in ("add", "update") and e.details.get("evidence") == "observed"
-            }
-            nodes = nodes_of(state, prefix, {i for i in observed if i is not None})
+            observed = {e.track_id for e in events if isinstance(e, Sighting)}
+            nodes = nodes_of(state, prefix, observed)
             recorder.batch(last_frame, nodes, graph_events(last_frame, recorder.last, nodes))
         else:
             recorder.batch(last_frame, nodes_of(state, prefix), stamp(last_frame, events, prefix))

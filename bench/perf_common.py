@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from core.events import Event, TrackAdded, TrackUpdated
+from core.events import Event, ObjectAdded, ObjectObserved, Observation, VisibleMiss
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 EMBEDDING_DIM = 64
@@ -27,17 +27,17 @@ def write_results(name: str, results: dict[str, Any]) -> Path:
     return path
 
 
-def observation(rng: np.random.Generator, center: np.ndarray, frame_id: str) -> dict[str, Any]:
+def observation(rng: np.random.Generator, center: np.ndarray, frame_id: str) -> Observation:
     """One observation as decide writes it."""
-    return {
-        "frame_id": frame_id,
-        "label": "mug",
-        "score": 0.9,
-        "center": [float(v) for v in center],
-        "extent": [0.08, 0.08, 0.1],
-        "valid_pixels": int(rng.integers(200, 2000)),
-        "parent": None,
-    }
+    return Observation(
+        frame_id=frame_id,
+        label="mug",
+        score=0.9,
+        center=(float(center[0]), float(center[1]), float(center[2])),
+        extent=(0.08, 0.08, 0.1),
+        valid_pixels=int(rng.integers(200, 2000)),
+        parent=None,
+    )
 
 
 def synthetic_events(n_events: int, n_tracks: int = 500, seed: int = 0) -> Iterator[Event]:
@@ -51,20 +51,18 @@ def synthetic_events(n_events: int, n_tracks: int = 500, seed: int = 0) -> Itera
         frame_id = f"f{index:07d}"
         if index < n_tracks:
             logodds[index], batches[index] = 1.0, 1
-            yield TrackAdded(
-                f"trk-{index + 1:06d}",
-                "tentative",
-                frame_id,
-                {
-                    "kind": "object",
-                    "observations": [observation(rng, centers[index], frame_id)],
-                    "embedding_sum": [float(v) for v in rng.normal(size=EMBEDDING_DIM)],
-                    "embedding_count": 1,
-                    "timestamp": float(index),
-                    "existence_logodds": 1.0,
-                    "p_exist": 0.731,
-                    "batches_observed": 1,
-                },
+            yield ObjectAdded(
+                track_id=f"trk-{index + 1:06d}",
+                state="tentative",
+                frame_id=frame_id,
+                observations=(observation(rng, centers[index], frame_id),),
+                embedding_sum=tuple(float(v) for v in rng.normal(size=EMBEDDING_DIM)),
+                embedding_count=1,
+                timestamp=float(index),
+                existence_logodds=1.0,
+                p_exist=0.731,
+                batches_observed=1,
+                parent_evidence={},
             )
             continue
         track = int(rng.integers(n_tracks))
@@ -73,35 +71,30 @@ def synthetic_events(n_events: int, n_tracks: int = 500, seed: int = 0) -> Itera
             centers[track] += rng.normal(0, 0.01, size=3)
             logodds[track] = min(4.0, logodds[track] + 1.0)
             misses[track], batches[track] = 0, batches[track] + 1
-            yield TrackUpdated(
-                track_id,
-                "confirmed",
-                frame_id,
-                {
-                    "evidence": "observed",
-                    "observations": [observation(rng, centers[track], frame_id)],
-                    "embedding_sum": [float(v) for v in rng.normal(size=EMBEDDING_DIM)],
-                    "embedding_count": 1,
-                    "timestamp": float(index),
-                    "existence_logodds": float(logodds[track]),
-                    "p_exist": float(1 / (1 + np.exp(-logodds[track]))),
-                    "batches_observed": int(batches[track]),
-                    "reacquired": False,
-                },
+            yield ObjectObserved(
+                track_id=track_id,
+                state="confirmed",
+                frame_id=frame_id,
+                observations=(observation(rng, centers[track], frame_id),),
+                embedding_sum=tuple(float(v) for v in rng.normal(size=EMBEDDING_DIM)),
+                embedding_count=1,
+                timestamp=float(index),
+                existence_logodds=float(logodds[track]),
+                p_exist=float(1 / (1 + np.exp(-logodds[track]))),
+                batches_observed=int(batches[track]),
+                reacquired=False,
+                parent_evidence={},
             )
         else:
             logodds[track] = max(-4.0, logodds[track] - 0.7)
             misses[track] += 1
-            yield TrackUpdated(
-                track_id,
-                "confirmed",
-                frame_id,
-                {
-                    "evidence": "visible_miss",
-                    "samples_passed": int(rng.integers(2, 28)),
-                    "samples_total": 27,
-                    "existence_logodds": float(logodds[track]),
-                    "p_exist": float(1 / (1 + np.exp(-logodds[track]))),
-                    "visible_misses": int(misses[track]),
-                },
+            yield VisibleMiss(
+                track_id=track_id,
+                state="confirmed",
+                frame_id=frame_id,
+                samples_passed=int(rng.integers(2, 28)),
+                samples_total=27,
+                existence_logodds=float(logodds[track]),
+                p_exist=float(1 / (1 + np.exp(-logodds[track]))),
+                visible_misses=int(misses[track]),
             )

@@ -9,7 +9,7 @@ from typing import Any
 import orjson
 
 from core.errors import StateConflict
-from core.events import BaselineFrozen, BaselineLoaded, Event
+from core.events import BaselineFrozen, BaselineLoaded, BaselineSource, Event
 from core.state import SceneState, Track
 
 PACKAGE_FORMAT = "pbdag-baseline/1"
@@ -60,48 +60,37 @@ def decide_freeze(state: SceneState, scene_id: str) -> tuple[list[Event], dict[s
         raise StateConflict("the scene has no confirmed fixture to freeze")
     fixture_ids = [fixture["track_id"] for fixture in package["fixtures"]]
     event = BaselineFrozen(
-        None,
-        None,
-        None,
-        {"version": version, "sha256": package_sha256(package), "fixture_ids": fixture_ids},
+        version=version, sha256=package_sha256(package), fixture_ids=tuple(fixture_ids)
     )
     return [event], package
 
 
 def decide_load(package: Mapping[str, Any]) -> list[Event]:
     """A new session from a package: its fixtures keep their canonical identities, pinned."""
-    records = [loaded_fixture(fixture) for fixture in package["fixtures"]]
+    fixtures = tuple(loaded_fixture(fixture) for fixture in package["fixtures"])
     numbers = [
-        int(record["track_id"].rsplit("-", 1)[-1])
-        for record in records
-        if record["track_id"][-1].isdigit()
+        int(fixture.track_id.rsplit("-", 1)[-1])
+        for fixture in fixtures
+        if fixture.track_id[-1].isdigit()
     ]
+    source = BaselineSource(
+        scene_id=package["scene_id"], version=package["version"], sha256=package_sha256(package)
+    )
     return [
         BaselineLoaded(
-            None,
-            None,
-            None,
-            {
-                "source": {
-                    "scene_id": package["scene_id"],
-                    "version": package["version"],
-                    "sha256": package_sha256(package),
-                },
-                "fixtures": records,
-                "next_track_number": max(numbers, default=0) + 1,
-            },
+            source=source, fixtures=fixtures, next_track_number=max(numbers, default=0) + 1
         )
     ]
 
 
-def loaded_fixture(fixture: Mapping[str, Any]) -> dict[str, Any]:
+def loaded_fixture(fixture: Mapping[str, Any]) -> Track:
     """The track record of a baseline fixture: confirmed, published where the package says, pinned."""
     center = list(fixture["center"])
     return Track(
         track_id=fixture["track_id"],
         kind="fixture",
         lifecycle="confirmed",
-        class_evidence=dict(fixture["class_evidence"]),
+        class_evidence=dict(sorted(fixture["class_evidence"].items())),
         existence_logodds=float(fixture["existence_logodds"]),
         center=(center[0], center[1], center[2]),
         extent=(fixture["extent"][0], fixture["extent"][1], fixture["extent"][2]),
@@ -109,4 +98,4 @@ def loaded_fixture(fixture: Mapping[str, Any]) -> dict[str, Any]:
         published_center=(center[0], center[1], center[2]),
         pinned=True,
         verification=None,
-    ).to_dict()
+    )

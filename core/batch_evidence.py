@@ -14,7 +14,7 @@ from core.geometry import Proposal
 from core.observation import Frame
 from core.params import Params
 from core.rules import PAPER_RULES, UpdateRules
-from core.state import SceneState
+from core.state import SceneState, TrackKind
 from core.support import SupportSurface, support_of
 from core.transitions import (
     added_fixture,
@@ -112,7 +112,7 @@ class BatchEvidence:
                 self._embeddings[row] = None if first is None else first.embedding
         return self._embeddings[row]
 
-    def _new_id(self, kind: str, label: str, center: FloatArray) -> str:
+    def _new_id(self, kind: TrackKind, label: str, center: FloatArray) -> str:
         track_id = f"trk-{self.state.next_track_number + len(self.new_track_ids):06d}"
         self.new_track_ids.append(track_id)
         self._row[track_id] = len(self._ids)

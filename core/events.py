@@ -1,177 +1,486 @@
-"""Typed audit events: one frozen dataclass per event type (section 3.3, "Lifecycle transitions").
+"""Typed audit events: one frozen dataclass per event (section 3.3, "Lifecycle transitions").
 
-Events carry what `evolve` needs, so folding the log never recomputes perception. `details`
-holds only JSON-able values (str, int, float, bool, None, lists and dicts of them).
+Events are the schema of the log. Each class declares its payload fields in the order the log
+stores them, and carries what `evolve` needs, so folding the log never recomputes perception.
+Every event has an envelope (the track it concerns, the lifecycle state after it, the frame it
+came from), stored in columns of its own; `details()` is the rest, as stored JSON.
+
+A few stored types hold more than one class, told apart by the payload itself (the stored JSON
+predates these classes and is kept byte for byte): `add` by its `kind`, `update` by its
+`evidence` and, for observations, by whether it carries a fixture's EMA `center`.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any, ClassVar, Literal
+from dataclasses import dataclass
+from typing import Annotated, Any, ClassVar, Literal
 
-LifecycleState = Literal["tentative", "confirmed", "demoted", "removed"]
-LIFECYCLE_STATES: tuple[str, ...] = ("tentative", "confirmed", "demoted", "removed")
+from pydantic import ConfigDict, Field, TypeAdapter
+
+from core.state import LifecycleState, Track, Vec3
+
+__all__ = [
+    "BaselineFrozen",
+    "BaselineLoaded",
+    "BaselineSource",
+    "Event",
+    "FixtureAdded",
+    "FixtureEvidence",
+    "FixtureObserved",
+    "InspectionRecorded",
+    "LifecycleState",
+    "ObjectAdded",
+    "ObjectObserved",
+    "Observation",
+    "SceneCreated",
+    "Sighting",
+    "TrackAdded",
+    "TrackConfirmed",
+    "TrackDemoted",
+    "TrackEvent",
+    "TrackMoved",
+    "TrackObserved",
+    "TrackRemoved",
+    "TrackReparented",
+    "TrackUpdated",
+    "TrackVerified",
+    "VerificationRequested",
+    "VisibleMiss",
+    "VoxelDetection",
+    "event_from_record",
+    "event_to_record",
+    "non_finite_field",
+]
+
+# Only finite numbers are stored: a log with NaN or infinity could not be replayed.
+_FINITE = ConfigDict(allow_inf_nan=False)
 
 
-@dataclass(frozen=True)
+def _absent_when_none(value: object) -> bool:
+    return value is None
+
+
+# A payload key that the log omits (rather than storing null) when it does not apply.
+Omitted = Field(exclude_if=_absent_when_none)
+
+
+# -- records inside payloads -------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class Observation:
+    """One grounded observation of a track in a batch (a proposal, or a fixture cluster)."""
+
+    __pydantic_config__ = _FINITE
+    frame_id: str
+    label: str
+    score: float
+    center: Vec3
+    extent: Vec3
+    valid_pixels: int  # inlier pixels of an object mask; voxels of a fixture cluster
+    parent: str | None  # support parent from geometry, None when on nothing known
+
+
+@dataclass(frozen=True, kw_only=True)
+class VoxelDetection:
+    """One fixture mask's contribution to the voxel map: class similarities and covered voxels."""
+
+    __pydantic_config__ = _FINITE
+    frame_id: str
+    class_scores: tuple[float, ...]  # in the order of params.fixtures.taxonomy
+    voxels: tuple[int, ...]  # flat (x, y, z) integer voxel keys
+
+
+@dataclass(frozen=True, kw_only=True)
+class BaselineSource:
+    """The frozen package a session started from."""
+
+    __pydantic_config__ = _FINITE
+    scene_id: str
+    version: int
+    sha256: str
+
+
+# -- the envelope ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
 class Event:
-    """Base of every event: the track it concerns and its lifecycle state after the event."""
+    """Base of every event: the envelope the log keeps in columns."""
 
+    __pydantic_config__ = _FINITE
     type: ClassVar[str] = "event"
-    track_id: str | None
-    state: str | None
+    track_id: str | None = None
+    state: LifecycleState | None = None
     frame_id: str | None = None
-    details: Mapping[str, Any] = field(default_factory=dict)
+
+    def details(self) -> dict[str, Any]:
+        """The payload as stored JSON (JSON-able values, in the stored key order)."""
+        result: dict[str, Any] = _adapter(type(self)).dump_python(
+            self, mode="json", by_alias=True, exclude=set(_ENVELOPE)
+        )
+        return result
+
+    def touched_tracks(self) -> tuple[str, ...]:
+        """Every track whose state the event changes."""
+        return () if self.track_id is None else (self.track_id,)
 
 
-@dataclass(frozen=True)
+_ENVELOPE = frozenset({"track_id", "state", "frame_id"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackEvent(Event):
+    """An event about one track: it names the track and its lifecycle state after the event."""
+
+    track_id: str
+    state: LifecycleState
+
+
+# -- scene events ------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
 class SceneCreated(Event):
     """First event of every scene: its name and the parameters its events are decided with."""
 
     type: ClassVar[str] = "scene_created"
+    name: str
+    params: Mapping[str, Any]  # Params.to_dict(); folded with Params.from_dict
+    baseline: Annotated[BaselineSource | None, Omitted] = None
 
 
-@dataclass(frozen=True)
-class TrackAdded(Event):
-    """A new internal hypothesis, with the batch's observations of it."""
-
-    type: ClassVar[str] = "add"
-
-
-@dataclass(frozen=True)
-class TrackConfirmed(Event):
-    """Graph publication: cross-batch confirmation with p_exist >= 0.72."""
-
-    type: ClassVar[str] = "confirm"
-
-
-@dataclass(frozen=True)
-class TrackUpdated(Event):
-    """One existence update of a batch: `details.evidence` is `observed` or `visible_miss`."""
-
-    type: ClassVar[str] = "update"
-
-
-@dataclass(frozen=True)
-class TrackMoved(Event):
-    """A published track is at least 0.35 m from its last published position."""
-
-    type: ClassVar[str] = "move"
-
-
-@dataclass(frozen=True)
-class TrackReparented(Event):
-    """The support parent changed: `details` names the old and the new parent."""
-
-    type: ClassVar[str] = "reparent"
-
-
-@dataclass(frozen=True)
-class TrackDemoted(Event):
-    """A published track fell below p_exist 0.30 and is unpublished."""
-
-    type: ClassVar[str] = "demote"
-
-
-@dataclass(frozen=True)
-class TrackRemoved(Event):
-    """p_exist <= 0.12 after at least three visibility-admissible misses."""
-
-    type: ClassVar[str] = "remove"
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FixtureEvidence(Event):
     """Class evidence of the batch's fixture masks, added to the scene's voxel map."""
 
     type: ClassVar[str] = "fixture_evidence"
+    detections: tuple[VoxelDetection, ...]
 
 
-@dataclass(frozen=True)
-class VerificationRequested(Event):
-    """A near-threshold or class-conflicting fixture waits for one bounded verification."""
-
-    type: ClassVar[str] = "verification_requested"
-
-
-@dataclass(frozen=True)
-class TrackVerified(Event):
-    """A verdict on a pending track: evidence weight 3, existence +1.8 or -2.2."""
-
-    type: ClassVar[str] = "verify"
-
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BaselineFrozen(Event):
     """The confirmed fixtures frozen as an immutable, versioned package; they become pinned."""
 
     type: ClassVar[str] = "baseline_frozen"
+    version: int
+    sha256: str
+    fixture_ids: tuple[str, ...]
+
+    def touched_tracks(self) -> tuple[str, ...]:
+        """The fixtures it pins."""
+        return self.fixture_ids
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class BaselineLoaded(Event):
     """A new session starts from a frozen baseline: its fixtures keep their identities."""
 
     type: ClassVar[str] = "baseline_loaded"
+    source: BaselineSource
+    fixtures: tuple[Track, ...]  # confirmed, pinned, published where the package says
+    next_track_number: int
+
+    def touched_tracks(self) -> tuple[str, ...]:
+        """The fixtures it loads."""
+        return tuple(fixture.track_id for fixture in self.fixtures)
 
 
-@dataclass(frozen=True)
-class InspectionRecorded(Event):
+# -- a track appears ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackAdded(TrackEvent):
+    """A new internal hypothesis (`add`), with the batch's observations of it."""
+
+    type: ClassVar[str] = "add"
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectAdded(TrackAdded):
+    """A new object hypothesis: the prior plus one positive observation (equation (3))."""
+
+    evidence: Literal["observed"] = "observed"
+    observations: tuple[Observation, ...]
+    embedding_sum: tuple[float, ...] | None  # appearance of this batch, summed
+    embedding_count: int
+    timestamp: float
+    kind: Literal["object"] = "object"
+    existence_logodds: float
+    p_exist: float
+    batches_observed: int
+    parent_evidence: Mapping[str, float]
+
+
+@dataclass(frozen=True, kw_only=True)
+class FixtureAdded(TrackAdded):
+    """A new coarse fixture hypothesis from a voxel cluster no fixture track explains."""
+
+    evidence: Literal["observed"] = "observed"
+    observations: tuple[Observation, ...]
+    center: Vec3
+    margin: float  # mean top-vs-second class margin over the cluster
+    best_frame: str | None  # the frame to crop for a verifier
+    best_frame_support: int
+    embedding_sum: None = None
+    embedding_count: int = 0
+    kind: Literal["fixture"] = "fixture"
+    existence_logodds: float
+    p_exist: float
+    batches_observed: int
+    timestamp: float
+
+
+# -- one existence update per track per batch (`update`) ---------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackUpdated(TrackEvent):
+    """One existence update of a batch (equation (3)): an observation or a visible miss."""
+
+    type: ClassVar[str] = "update"
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackObserved(TrackUpdated):
+    """A positive batch for an existing track."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectObserved(TrackObserved):
+    """State fusion of a positive batch for an object: latest center, evidence, appearance."""
+
+    evidence: Literal["observed"] = "observed"
+    observations: tuple[Observation, ...]
+    embedding_sum: tuple[float, ...] | None
+    embedding_count: int
+    timestamp: float
+    existence_logodds: float
+    p_exist: float
+    batches_observed: int
+    reacquired: bool  # a removed track recovered its identity and restarts as a hypothesis
+    parent_evidence: Mapping[str, float]  # after this batch (reset when the object relocated)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FixtureObserved(TrackObserved):
+    """Support for a fixture from one more batch; its center is the EMA (alpha 0.35)."""
+
+    evidence: Literal["observed"] = "observed"
+    observations: tuple[Observation, ...]
+    center: Vec3
+    margin: float
+    best_frame: str | None
+    best_frame_support: int
+    embedding_sum: None = None
+    embedding_count: int = 0
+    existence_logodds: float
+    p_exist: float
+    batches_observed: int
+    reacquired: bool
+    timestamp: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class VisibleMiss(TrackUpdated):
+    """An unmatched track the visibility gate says was observable: a miss (U V = 1)."""
+
+    evidence: Literal["visible_miss"] = "visible_miss"
+    samples_passed: int
+    samples_total: int
+    existence_logodds: float
+    p_exist: float
+    visible_misses: int
+
+
+# -- lifecycle ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackConfirmed(TrackEvent):
+    """Graph publication: cross-batch confirmation with p_exist >= 0.72."""
+
+    type: ClassVar[str] = "confirm"
+    p_exist: float
+    center: Vec3
+    batches_observed: int
+    consensus: Annotated[bool | None, Omitted] = None  # fixtures: did the consensus gate pass
+    reason: Annotated[Literal["verification", "inspection"] | None, Omitted] = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackMoved(TrackEvent):
+    """A published track is at least 0.35 m from its last published position."""
+
+    type: ClassVar[str] = "move"
+    moved_from: Annotated[Vec3, Field(alias="from")]
+    to: Vec3
+    distance: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackReparented(TrackEvent):
+    """The support parent changed: the old and the new parent."""
+
+    type: ClassVar[str] = "reparent"
+    old_parent: str | None
+    new_parent: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackDemoted(TrackEvent):
+    """A published track fell below p_exist 0.30 and is unpublished."""
+
+    type: ClassVar[str] = "demote"
+    p_exist: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackRemoved(TrackEvent):
+    """p_exist <= 0.12 after at least three visibility-admissible misses, or a rejection."""
+
+    type: ClassVar[str] = "remove"
+    p_exist: float
+    visible_misses: Annotated[int | None, Omitted] = None
+    reason: Annotated[Literal["verification_rejected"] | None, Omitted] = None
+
+
+# -- verification, inspection ------------------------------------------------------------------
+
+
+@dataclass(frozen=True, kw_only=True)
+class VerificationRequested(TrackEvent):
+    """A near-threshold or class-conflicting fixture waits for one bounded verification."""
+
+    type: ClassVar[str] = "verification_requested"
+    candidates: Mapping[str, float]  # each class's mean similarity over the cluster
+    batch_votes: Mapping[str, float]  # how the supporting batches voted
+    agreement: float
+    mean_margin: float
+    batches_observed: int
+    best_frame: str | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackVerified(TrackEvent):
+    """A verdict on a pending track: evidence weight 3, existence +1.8 or -2.2."""
+
+    type: ClassVar[str] = "verify"
+    verdict: Literal["confirm", "reject"]
+    label: str
+    source: str
+    verdict_frame: Annotated[str | None, Field(alias="frame_id")]  # equals the envelope's
+    existence_logodds: float
+    p_exist: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class InspectionRecorded(TrackEvent):
     """One fixture-centered capture in the ledger: frames, outcome and attached children."""
 
     type: ClassVar[str] = "inspection"
+    capture_id: str
+    fixture_id: str
+    frames: tuple[str, ...]
+    primary_frame: str | None
+    fixture_verified: bool | None
+    outcome: Literal["completed", "support_not_visible", "parent_rejected"]
+    children: tuple[str, ...]
+    attempts: int
+    status: Literal["completed", "abandoned"] | None
 
 
-EVENT_TYPES: dict[str, type[Event]] = {
+# A positive observation of a track in a batch (isinstance accepts this union).
+Sighting = ObjectAdded | FixtureAdded | ObjectObserved | FixtureObserved
+
+
+# -- the stored form ---------------------------------------------------------------------------
+
+
+_ADAPTERS: dict[type[Event], TypeAdapter[Any]] = {}
+
+
+def _adapter(cls: type[Event]) -> TypeAdapter[Any]:
+    """pydantic's validator and serializer of one event class, built on first use."""
+    adapter = _ADAPTERS.get(cls)
+    if adapter is None:
+        adapter = _ADAPTERS[cls] = TypeAdapter(cls)
+    return adapter
+
+
+_SINGLE_CLASS: dict[str, type[Event]] = {
     cls.type: cls
     for cls in (
         SceneCreated,
-        TrackAdded,
+        FixtureEvidence,
+        BaselineFrozen,
+        BaselineLoaded,
         TrackConfirmed,
-        TrackUpdated,
         TrackMoved,
         TrackReparented,
         TrackDemoted,
         TrackRemoved,
-        FixtureEvidence,
         VerificationRequested,
         TrackVerified,
-        BaselineFrozen,
-        BaselineLoaded,
         InspectionRecorded,
     )
 }
+EVENT_TYPE_NAMES: tuple[str, ...] = (*sorted(_SINGLE_CLASS), "add", "update")
+
+
+def event_class(type_name: str, details: Mapping[str, Any]) -> type[Event]:
+    """The class of a stored event; ValueError for a type or payload no class describes."""
+    if type_name == "add":
+        return FixtureAdded if details.get("kind") == "fixture" else ObjectAdded
+    if type_name == "update":
+        if details.get("evidence") == "visible_miss":
+            return VisibleMiss
+        return FixtureObserved if "center" in details else ObjectObserved
+    cls = _SINGLE_CLASS.get(type_name)
+    if cls is None:
+        raise ValueError(f"unknown event type {type_name!r}")
+    return cls
+
+
+def event_from_record(record: Mapping[str, Any]) -> Event:
+    """An event from its stored form; pydantic's ValidationError names a bad payload field."""
+    details: Mapping[str, Any] = record.get("details") or {}
+    cls = event_class(record["type"], details)
+    values = {
+        **details,
+        "track_id": record.get("track_id"),
+        "state": record.get("state"),
+        "frame_id": record.get("frame_id"),
+    }
+    event: Event = _adapter(cls).validate_python(values)
+    return event
 
 
 def event_to_record(event: Event) -> dict[str, Any]:
-    """The JSON-able form stored in the log."""
+    """The stored form: type, envelope and the JSON-able payload."""
     return {
         "type": event.type,
         "track_id": event.track_id,
         "state": event.state,
         "frame_id": event.frame_id,
-        "details": dict(event.details),
+        "details": event.details(),
     }
 
 
-def event_from_record(record: Mapping[str, Any]) -> Event:
-    """Inverse of `event_to_record`; unknown types raise ValueError."""
-    cls = EVENT_TYPES.get(record["type"])
-    if cls is None:
-        raise ValueError(f"unknown event type {record['type']!r}")
-    return cls(
-        track_id=record.get("track_id"),
-        state=record.get("state"),
-        frame_id=record.get("frame_id"),
-        details=record.get("details") or {},
-    )
-
-
-def touched_tracks(event: Event) -> tuple[str, ...]:
-    """Every track whose state the event changes (scene-level events may change several)."""
-    if isinstance(event, BaselineFrozen):
-        return tuple(event.details["fixture_ids"])
-    if isinstance(event, BaselineLoaded):
-        return tuple(record["track_id"] for record in event.details["fixtures"])
-    return () if event.track_id is None else (event.track_id,)
+def non_finite_field(value: Any, path: str = "details") -> str | None:
+    """The path of the first NaN or infinite number in a JSON-able value, or None."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else path
+    if isinstance(value, Mapping):
+        for key, item in value.items():
+            found = non_finite_field(item, f"{path}.{key}")
+            if found is not None:
+                return found
+    elif isinstance(value, list | tuple):
+        for index, item in enumerate(value):
+            found = non_finite_field(item, f"{path}[{index}]")
+            if found is not None:
+                return found
+    return None

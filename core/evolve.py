@@ -3,28 +3,32 @@
 from __future__ import annotations
 
 import operator
-from collections.abc import Iterable, Mapping
-from typing import Any
+from collections.abc import Iterable
 
 from core.events import (
     BaselineFrozen,
     BaselineLoaded,
     Event,
+    FixtureAdded,
     FixtureEvidence,
+    FixtureObserved,
     InspectionRecorded,
+    ObjectAdded,
+    ObjectObserved,
     SceneCreated,
-    TrackAdded,
     TrackConfirmed,
     TrackDemoted,
     TrackMoved,
     TrackRemoved,
     TrackReparented,
-    TrackUpdated,
     TrackVerified,
     VerificationRequested,
+    VisibleMiss,
 )
 from core.params import Params
-from core.state import BaselineRecord, SceneState, Track, Vec3, VoxelKey
+from core.state import BaselineRecord, SceneState, Track, VoxelKey
+
+Voxels = dict[VoxelKey, tuple[int, tuple[float, ...]]]
 
 
 def evolve(state: SceneState, event: Event) -> SceneState:
@@ -37,68 +41,62 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
     tracks = dict(state.tracks)
     params, name = state.params, state.name
     head_seq, next_track_number = state.head_seq, state.next_track_number
-    voxels: dict[VoxelKey, tuple[int, tuple[float, ...]]] | None = None  # copied on first use
+    voxels: Voxels | None = None  # copied on first use
     baselines, source_baseline = list(state.baselines), state.source_baseline
     for event in events:
         head_seq += 1
-        if isinstance(event, SceneCreated):
-            params = Params.from_dict(event.details.get("params"))
-            name = str(event.details.get("name", ""))
-            source_baseline = event.details.get("baseline")
-            continue
-        if isinstance(event, FixtureEvidence):
-            if voxels is None:
-                voxels = dict(state.voxels)
-            _add_voxel_evidence(voxels, event)
-            continue
-        if isinstance(event, BaselineFrozen):
-            fixture_ids = tuple(event.details["fixture_ids"])
-            baselines.append(
-                BaselineRecord(
-                    int(event.details["version"]),
-                    head_seq,
-                    str(event.details["sha256"]),
-                    fixture_ids,
+        match event:
+            case SceneCreated():
+                params = Params.from_dict(dict(event.params))
+                name = event.name
+                source_baseline = None if event.baseline is None else event.baseline.__dict__
+            case FixtureEvidence():
+                if voxels is None:
+                    voxels = dict(state.voxels)
+                _add_voxel_evidence(voxels, event)
+            case BaselineFrozen():
+                record = BaselineRecord(event.version, head_seq, event.sha256, event.fixture_ids)
+                baselines.append(record)
+                for fixture_id in event.fixture_ids:
+                    tracks[fixture_id] = tracks[fixture_id].evolved(pinned=True)
+            case BaselineLoaded():
+                for fixture in event.fixtures:
+                    tracks[fixture.track_id] = fixture
+                next_track_number = max(next_track_number, event.next_track_number)
+            case ObjectAdded() | FixtureAdded():
+                next_track_number += 1
+                tracks[event.track_id] = _observe(_new_track(event), event, params)
+            case ObjectObserved() | FixtureObserved():
+                tracks[event.track_id] = _observe(tracks[event.track_id], event, params)
+            case VisibleMiss():
+                # A visibility-admissible miss: only existence and the miss count change.
+                tracks[event.track_id] = tracks[event.track_id].evolved(
+                    existence_logodds=event.existence_logodds,
+                    visible_misses=event.visible_misses,
+                    lifecycle=event.state,
                 )
-            )
-            for fixture_id in fixture_ids:
-                tracks[fixture_id] = tracks[fixture_id].evolved(pinned=True)
-            continue
-        if isinstance(event, BaselineLoaded):
-            for record in event.details["fixtures"]:
-                tracks[record["track_id"]] = Track.from_dict(record)
-            next_track_number = max(next_track_number, int(event.details["next_track_number"]))
-            continue
-        track_id = event.track_id
-        if track_id is None:
-            raise ValueError(f"{event.type} event without a track id")
-        if isinstance(event, TrackAdded):
-            next_track_number += 1
-            tracks[track_id] = _observe(_new_track(track_id, event), event, params)
-            continue
-        track = tracks[track_id]
-        if isinstance(event, TrackUpdated):
-            tracks[track_id] = _apply_update(track, event, params)
-        elif isinstance(event, TrackConfirmed):
-            published = track.published_center or _vec3(event.details["center"])
-            tracks[track_id] = track.evolved(lifecycle="confirmed", published_center=published)
-        elif isinstance(event, TrackMoved):
-            tracks[track_id] = track.evolved(published_center=_vec3(event.details["to"]))
-        elif isinstance(event, TrackReparented):
-            tracks[track_id] = track.evolved(parent=event.details.get("new_parent"))
-        elif isinstance(event, TrackDemoted | TrackRemoved):
-            tracks[track_id] = track.evolved(lifecycle=str(event.state))
-        elif isinstance(event, VerificationRequested):
-            tracks[track_id] = track.evolved(verification="pending")
-        elif isinstance(event, TrackVerified):
-            tracks[track_id] = _apply_verdict(track, event, params)
-        elif isinstance(event, InspectionRecorded):
-            tracks[track_id] = track.evolved(
-                inspection_status=event.details.get("status"),
-                inspection_attempts=int(event.details["attempts"]),
-            )
-        else:
-            raise ValueError(f"no evolve rule for event type {event.type!r}")
+            case TrackConfirmed():
+                track = tracks[event.track_id]
+                published = track.published_center or event.center
+                tracks[event.track_id] = track.evolved(
+                    lifecycle="confirmed", published_center=published
+                )
+            case TrackMoved():
+                tracks[event.track_id] = tracks[event.track_id].evolved(published_center=event.to)
+            case TrackReparented():
+                tracks[event.track_id] = tracks[event.track_id].evolved(parent=event.new_parent)
+            case TrackDemoted() | TrackRemoved():
+                tracks[event.track_id] = tracks[event.track_id].evolved(lifecycle=event.state)
+            case VerificationRequested():
+                tracks[event.track_id] = tracks[event.track_id].evolved(verification="pending")
+            case TrackVerified():
+                tracks[event.track_id] = _apply_verdict(tracks[event.track_id], event, params)
+            case InspectionRecorded():
+                tracks[event.track_id] = tracks[event.track_id].evolved(
+                    inspection_status=event.status, inspection_attempts=event.attempts
+                )
+            case _:
+                raise ValueError(f"no evolve rule for event {type(event).__name__}")
     return SceneState(
         params=params,
         name=name,
@@ -111,112 +109,88 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
     )
 
 
-def _add_voxel_evidence(
-    voxels: dict[VoxelKey, tuple[int, tuple[float, ...]]], event: Event
-) -> None:
+def _add_voxel_evidence(voxels: Voxels, event: FixtureEvidence) -> None:
     """Each fixture mask adds one count and its class similarities to every voxel it covers."""
-    for detection in event.details["detections"]:
-        scores = tuple(detection["class_scores"])
-        flat = detection["voxels"]
+    for detection in event.detections:
+        scores = detection.class_scores
+        flat = detection.voxels
         for i in range(0, len(flat), 3):
             key = (flat[i], flat[i + 1], flat[i + 2])
             count, totals = voxels.get(key) or (0, (0.0,) * len(scores))
             voxels[key] = (count + 1, tuple(map(operator.add, totals, scores)))
 
 
-def _apply_verdict(track: Track, event: Event, params: Params) -> Track:
+def _apply_verdict(track: Track, event: TrackVerified, params: Params) -> Track:
     """A cached verification: evidence weight 3 for the verified label, existence from the event."""
-    details = event.details
     class_evidence = dict(track.class_evidence)
-    label = details["label"]
-    class_evidence[label] = (
-        class_evidence.get(label, 0.0) + params.fusion.verification_evidence_weight
+    class_evidence[event.label] = (
+        class_evidence.get(event.label, 0.0) + params.fusion.verification_evidence_weight
     )
     return track.evolved(
         class_evidence=class_evidence,
-        existence_logodds=float(details["existence_logodds"]),
-        verification="confirmed" if details["verdict"] == "confirm" else "rejected",
-        verdict_frame=details.get("frame_id"),
-        lifecycle=str(event.state),
+        existence_logodds=event.existence_logodds,
+        verification="confirmed" if event.verdict == "confirm" else "rejected",
+        verdict_frame=event.verdict_frame,
+        lifecycle=event.state,
     )
 
 
-def _new_track(track_id: str, event: Event) -> Track:
-    first = event.details["observations"][0]
+def _new_track(event: ObjectAdded | FixtureAdded) -> Track:
+    first = event.observations[0]
     return Track(
-        track_id=track_id,
-        kind=str(event.details["kind"]),
+        track_id=event.track_id,
+        kind=event.kind,
         lifecycle="tentative",
         class_evidence={},
         existence_logodds=0.0,
-        center=_vec3(first["center"]),
-        extent=_vec3(first["extent"]),
+        center=first.center,
+        extent=first.extent,
         recent_centers=(),
     )
 
 
-def _apply_update(track: Track, event: Event, params: Params) -> Track:
-    if event.details["evidence"] == "observed":
-        return _observe(track, event, params)
-    # A visibility-admissible miss: only existence and the miss count change.
-    return track.evolved(
-        existence_logodds=float(event.details["existence_logodds"]),
-        visible_misses=int(event.details["visible_misses"]),
-        lifecycle=str(event.state),
-    )
-
-
-def _observe(track: Track, event: Event, params: Params) -> Track:
+def _observe(
+    track: Track,
+    event: ObjectAdded | FixtureAdded | ObjectObserved | FixtureObserved,
+    params: Params,
+) -> Track:
     """State fusion of a positive batch: evidence, latest center, recent centers, appearance."""
-    details: Mapping[str, Any] = event.details
-    observations = details["observations"]
+    observations = event.observations
     weight = params.fusion.observation_evidence_weight
     class_evidence = dict(track.class_evidence)
-    parent_evidence = dict(track.parent_evidence)
     for observation in observations:
-        class_evidence[observation["label"]] = (
-            class_evidence.get(observation["label"], 0.0) + weight
-        )
-        if observation.get("parent") is not None:
-            parent_evidence[observation["parent"]] = (
-                parent_evidence.get(observation["parent"], 0.0) + weight
-            )
-    centers = track.recent_centers + tuple(_vec3(o["center"]) for o in observations)
+        class_evidence[observation.label] = class_evidence.get(observation.label, 0.0) + weight
+    centers = track.recent_centers + tuple(o.center for o in observations)
     embedding_sum = track.embedding_sum
-    if details.get("embedding_sum") is not None:
-        batch_sum = details["embedding_sum"]
+    if event.embedding_sum is not None:
         embedding_sum = (
-            tuple(float(v) for v in batch_sum)
+            event.embedding_sum
             if embedding_sum is None
-            else tuple(map(operator.add, embedding_sum, batch_sum))
+            else tuple(map(operator.add, embedding_sum, event.embedding_sum))
         )
     last = observations[-1]
-    extra: dict[str, Any] = {}
-    if "best_frame" in details:
-        extra.update(
-            best_frame=details["best_frame"], best_frame_support=int(details["best_frame_support"])
-        )
-    if "parent_evidence" in details:
-        parent_evidence = dict(details["parent_evidence"])
+    if isinstance(event, FixtureAdded | FixtureObserved):
+        # Fixtures: the EMA center, the best frame to crop, the class margin; no parents.
+        fixture_fields = {
+            "center": event.center,
+            "best_frame": event.best_frame,
+            "best_frame_support": event.best_frame_support,
+            "margin_sum": track.margin_sum + event.margin,
+            "parent_evidence": dict(track.parent_evidence),
+        }
+    else:
+        fixture_fields = {"center": last.center, "parent_evidence": dict(event.parent_evidence)}
     return track.evolved(
-        **extra,
-        margin_sum=track.margin_sum + float(details.get("margin", 0.0)),
-        lifecycle=str(event.state),
+        **fixture_fields,
+        lifecycle=event.state,
         class_evidence=class_evidence,
-        parent_evidence=parent_evidence,
-        existence_logodds=float(details["existence_logodds"]),
-        center=_vec3(details.get("center", last["center"])),
-        extent=_vec3(last["extent"]),
+        existence_logodds=event.existence_logodds,
+        extent=last.extent,
         recent_centers=centers[-params.fusion.max_recent_centers :],
         embedding_sum=embedding_sum,
-        embedding_count=track.embedding_count + int(details.get("embedding_count", 0)),
-        last_observed=float(details["timestamp"]),
-        last_observed_frame=str(last["frame_id"]),
-        batches_observed=int(details["batches_observed"]),
+        embedding_count=track.embedding_count + event.embedding_count,
+        last_observed=event.timestamp,
+        last_observed_frame=last.frame_id,
+        batches_observed=event.batches_observed,
         visible_misses=0,
     )
-
-
-def _vec3(values: Any) -> Vec3:
-    x, y, z = values
-    return (float(x), float(y), float(z))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from core.events import FixtureEvidence
+from core.events import FixtureEvidence, VoxelDetection
 from core.fixtures import (
     FixtureProposal,
     FixtureTrackView,
@@ -52,19 +52,14 @@ def fixture_batch(state: SceneState, batch: Batch, params: Params) -> FixtureBat
     if not evidence:
         return result
     result.evidence_event = FixtureEvidence(
-        None,
-        None,
-        None,
-        {
-            "detections": [
-                {
-                    "frame_id": e.frame_id,
-                    "class_scores": list(e.class_scores),
-                    "voxels": unpack(e.voxels).ravel().tolist(),
-                }
-                for e in evidence
-            ]
-        },
+        detections=tuple(
+            VoxelDetection(
+                frame_id=e.frame_id,
+                class_scores=e.class_scores,
+                voxels=tuple(unpack(e.voxels).ravel().tolist()),
+            )
+            for e in evidence
+        )
     )
     # Query the whole accumulated map against the taxonomy, then cluster each class.
     keys, counts, sums = merged_voxels(state.voxel_arrays, evidence)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from core.observation import Detection, Frame, Intrinsics
+from core.observation import Detection, DetectionKind, Frame, Intrinsics
 from core.params import ProposalParams
 
 FloatArray = npt.NDArray[np.float64]
@@ -19,7 +19,7 @@ class Proposal:
 
     label: str
     score: float
-    kind: str
+    kind: DetectionKind
     center: FloatArray  # (3,) world
     extent: FloatArray  # (3,) world axis-aligned box size
     embedding: FloatArray | None  # l2-normalized, or None

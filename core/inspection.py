@@ -7,7 +7,7 @@ show the fixture's support region. They are never fused.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Literal
 
 import numpy as np
 
@@ -15,13 +15,13 @@ from core.association import associate
 from core.batch_evidence import BatchEvidence
 from core.decide import ground_frame
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
-from core.events import Event, InspectionRecorded, TrackConfirmed
+from core.events import Event, InspectionRecorded, ObjectAdded, TrackConfirmed
 from core.geometry import Proposal
 from core.observation import Frame
 from core.params import Params
-from core.state import SceneState, Track
+from core.state import InspectionStatus, SceneState, Track
 from core.support import SupportSurface, support_of
-from core.transitions import added_object, observed_object
+from core.transitions import added_object, confirmed, observed_object, vec3
 from core.visibility import samples_passed
 
 SUPPORT_SLAB_M = 0.02  # thickness of the sampled support region (the fixture's top surface)
@@ -87,7 +87,7 @@ def decide_inspection(
         ),
         None,
     )
-    outcome = "completed"
+    outcome: Literal["completed", "support_not_visible", "parent_rejected"] = "completed"
     if fixture_verified is False:
         outcome = "parent_rejected"  # the client's model says this is not the fixture
     elif primary is None:
@@ -98,24 +98,27 @@ def decide_inspection(
         assert primary is not None
         events, children = _attach_children(state, fixture, primary, params)
     attempts = fixture.inspection_attempts + (outcome != "completed")
-    status = (
+    status: InspectionStatus | None = (
         "completed"
         if outcome == "completed"
         else ("abandoned" if attempts >= params.inspection.max_attempts else None)
     )
-    record: dict[str, Any] = {
-        "capture_id": capture_id,
-        "fixture_id": fixture_id,
-        "frames": [f.frame_id for f in frames],
-        "primary_frame": None if primary is None else primary.frame_id,
-        "fixture_verified": fixture_verified,
-        "outcome": outcome,
-        "children": children,
-        "attempts": attempts,
-        "status": status,
-    }
     frame_id = primary.frame_id if primary is not None else (frames[0].frame_id if frames else None)
-    return [*events, InspectionRecorded(fixture_id, fixture.lifecycle, frame_id, record)]
+    record = InspectionRecorded(
+        track_id=fixture_id,
+        state=fixture.lifecycle,
+        frame_id=frame_id,
+        capture_id=capture_id,
+        fixture_id=fixture_id,
+        frames=tuple(f.frame_id for f in frames),
+        primary_frame=None if primary is None else primary.frame_id,
+        fixture_verified=fixture_verified,
+        outcome=outcome,
+        children=tuple(children),
+        attempts=attempts,
+        status=status,
+    )
+    return [*events, record]
 
 
 def _attach_children(
@@ -146,21 +149,20 @@ def _attach_children(
             track_id = f"trk-{next_number:06d}"
             next_number += 1
             added = added_object(track_id, [proposal], parents, params)
-            # A verified capture stands in for cross-batch confirmation (section 3.2).
-            confirm = TrackConfirmed(
-                track_id,
-                "confirmed",
-                frame.frame_id,
-                {
-                    "p_exist": added[0].details["p_exist"],
-                    "center": [float(v) for v in proposal.center],
-                    "batches_observed": 1,
-                    "reason": "inspection",
-                },
-            )
-            if any(e.type == "confirm" for e in added):  # the params already publish on sight
+            if any(isinstance(e, TrackConfirmed) for e in added):  # published on sight already
                 events += added
             else:
-                events += [added[0], confirm, *added[1:]]
+                # A verified capture stands in for cross-batch confirmation (section 3.2).
+                first = added[0]
+                assert isinstance(first, ObjectAdded)
+                confirm = confirmed(
+                    track_id,
+                    frame.frame_id,
+                    first.p_exist,
+                    vec3(proposal.center),
+                    1,
+                    reason="inspection",
+                )
+                events += [first, confirm, *added[1:]]
         children.append(track_id)
     return events, children

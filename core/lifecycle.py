@@ -4,28 +4,45 @@ from __future__ import annotations
 
 import math
 
-from core.params import LifecycleParams
-from core.state import Vec3
+from core.params import LifecycleParams, Params
+from core.state import LifecycleState, TrackKind, Vec3
 
 
 def should_confirm(
-    lifecycle: str, p_exist: float, batches_observed: int, params: LifecycleParams
+    kind: TrackKind,
+    lifecycle: LifecycleState,
+    p_exist: float,
+    batches_observed: int,
+    params: Params,
 ) -> bool:
-    """Publication needs cross-batch confirmation and p_exist >= 0.72."""
+    """Publication needs cross-batch confirmation and p_exist >= 0.72.
+
+    The one confirmation rule of objects, fixtures and verdicts: fixtures need support from
+    more distinct batches (section 3.2), objects from `confirm_min_batches` (section 3.3).
+    """
+    min_batches = (
+        params.fixtures.confirm_min_batches
+        if kind == "fixture"
+        else params.lifecycle.confirm_min_batches
+    )
     return (
         lifecycle in ("tentative", "demoted")
-        and batches_observed >= params.confirm_min_batches
-        and p_exist >= params.confirm_min_p_exist
+        and batches_observed >= min_batches
+        and p_exist >= params.lifecycle.confirm_min_p_exist
     )
 
 
-def should_demote(lifecycle: str, p_exist: float, params: LifecycleParams) -> bool:
+def should_demote(lifecycle: LifecycleState, p_exist: float, params: LifecycleParams) -> bool:
     """A published node is demoted when p_exist < 0.30."""
     return lifecycle == "confirmed" and p_exist < params.demote_below_p_exist
 
 
 def should_remove(
-    lifecycle: str, p_exist: float, visible_misses: int, pinned: bool, params: LifecycleParams
+    lifecycle: LifecycleState,
+    p_exist: float,
+    visible_misses: int,
+    pinned: bool,
+    params: LifecycleParams,
 ) -> bool:
     """Removal needs p_exist <= 0.12 after at least three visibility-admissible misses."""
     return (

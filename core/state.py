@@ -6,7 +6,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from functools import cached_property
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -15,6 +15,10 @@ from core.params import Params
 from core.voxels import pack
 
 Vec3 = tuple[float, float, float]
+LifecycleState = Literal["tentative", "confirmed", "demoted", "removed"]
+TrackKind = Literal["object", "fixture"]
+VerificationStatus = Literal["pending", "confirmed", "rejected"]
+InspectionStatus = Literal["completed", "abandoned"]
 SNAPSHOT_FORMAT_VERSION = 2
 VoxelKey = tuple[int, int, int]
 
@@ -29,8 +33,8 @@ class Track:
     """One persistent track: class, existence, geometry, parent, appearance, identity, lifecycle."""
 
     track_id: str  # the persistent identity h_i
-    kind: str  # "object" or "fixture"
-    lifecycle: str  # s_i^life: tentative | confirmed | demoted | removed
+    kind: TrackKind
+    lifecycle: LifecycleState  # s_i^life
     class_evidence: Mapping[str, float]  # accumulated class evidence, normalized into p_cls
     existence_logodds: float  # l_i of equation (3)
     center: Vec3  # mu_i: the latest accepted center for dynamic objects
@@ -46,12 +50,12 @@ class Track:
     visible_misses: int = 0  # visibility-admissible misses since the last positive batch
     published_center: Vec3 | None = None  # where the graph last said the track is
     pinned: bool = False  # a fixture of a frozen baseline: exempt from dynamic removal
-    verification: str | None = None  # pending | confirmed | rejected (coarse-stage verification)
+    verification: VerificationStatus | None = None  # coarse-stage verification
     verdict_frame: str | None = None  # the observation the last verdict was about
     margin_sum: float = 0.0  # fixtures: summed top-vs-second class margin of supporting batches
     best_frame: str | None = None  # fixtures: the frame that contributed most evidence (to crop)
     best_frame_support: int = 0
-    inspection_status: str | None = None  # fixtures: completed | abandoned
+    inspection_status: InspectionStatus | None = None  # fixtures: close-range inspection
     inspection_attempts: int = 0  # failed captures so far
 
     def evolved(self, **changes: Any) -> Track:

@@ -3,31 +3,37 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from typing import Any
+from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
 from core.belief import update_existence
 from core.events import (
     Event,
-    TrackAdded,
+    FixtureAdded,
+    FixtureObserved,
+    ObjectAdded,
+    ObjectObserved,
+    Observation,
     TrackConfirmed,
     TrackDemoted,
     TrackMoved,
     TrackRemoved,
     TrackReparented,
-    TrackUpdated,
     VerificationRequested,
+    VisibleMiss,
 )
 from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
 from core.lifecycle import moved_distance, should_confirm, should_demote, should_move, should_remove
 from core.params import Params
-from core.state import Track, Vec3, logistic
+from core.state import LifecycleState, Track, Vec3, logistic
 
 
-def _vec(values: Any) -> list[float]:
-    return [float(v) for v in values]
+def vec3(values: Sequence[float] | np.ndarray) -> Vec3:
+    """Three floats from an array or sequence."""
+    return (float(values[0]), float(values[1]), float(values[2]))
 
 
 def _top(evidence: Mapping[str, float], current: str | None = None) -> str | None:
@@ -43,10 +49,27 @@ def _top(evidence: Mapping[str, float], current: str | None = None) -> str | Non
 # -- objects ---------------------------------------------------------------------------------
 
 
-def object_details(
-    track: Track | None, proposals: Sequence[Proposal], parents: Sequence[str | None]
-) -> dict[str, Any]:
-    """The batch's observations of one object track, as evolve needs them."""
+def _observations(
+    proposals: Sequence[Proposal], parents: Sequence[str | None]
+) -> tuple[Observation, ...]:
+    return tuple(
+        Observation(
+            frame_id=p.frame_id,
+            label=p.label,
+            score=float(p.score),
+            center=vec3(p.center),
+            extent=vec3(p.extent),
+            valid_pixels=p.valid_pixels,
+            parent=parent,
+        )
+        for p, parent in zip(proposals, parents, strict=True)
+    )
+
+
+def _embedding_sum(
+    track: Track | None, proposals: Sequence[Proposal]
+) -> tuple[tuple[float, ...] | None, int]:
+    """The batch's appearance (summed) in the track's dimension, and how many vectors it sums."""
     dim = (
         len(track.embedding_sum) if track is not None and track.embedding_sum is not None else None
     )
@@ -54,28 +77,17 @@ def object_details(
     if dim is None and embeddings:
         dim = embeddings[0].shape[0]
     embeddings = [e for e in embeddings if e.shape[0] == dim]
-    return {
-        "evidence": "observed",
-        "observations": [
-            {
-                "frame_id": p.frame_id,
-                "label": p.label,
-                "score": float(p.score),
-                "center": _vec(p.center),
-                "extent": _vec(p.extent),
-                "valid_pixels": p.valid_pixels,
-                "parent": parent,
-            }
-            for p, parent in zip(proposals, parents, strict=True)
-        ],
-        "embedding_sum": _vec(np.sum(embeddings, axis=0)) if embeddings else None,
-        "embedding_count": len(embeddings),
-        "timestamp": float(proposals[-1].timestamp),
-    }
+    if not embeddings:
+        return None, 0
+    return tuple(float(v) for v in np.sum(embeddings, axis=0)), len(embeddings)
 
 
 def _support_events(
-    track_id: str, lifecycle: str, frame_id: str, old_parent: str | None, evidence: dict[str, float]
+    track_id: str,
+    lifecycle: LifecycleState,
+    frame_id: str,
+    old_parent: str | None,
+    evidence: Mapping[str, float],
 ) -> list[Event]:
     """A valid support change emits `reparent` naming the old and the new parent."""
     new_parent = _top(evidence, old_parent)
@@ -83,20 +95,41 @@ def _support_events(
         return []
     return [
         TrackReparented(
-            track_id, lifecycle, frame_id, {"old_parent": old_parent, "new_parent": new_parent}
+            track_id=track_id,
+            state=lifecycle,
+            frame_id=frame_id,
+            old_parent=old_parent,
+            new_parent=new_parent,
         )
     ]
 
 
-def first_sighting(kind: str, params: Params) -> dict[str, Any]:
-    """Existence of a new hypothesis: the prior plus one positive observation (equation (3))."""
-    logodds = update_existence(params.existence.prior_logodds, params.existence, observed=True)
-    return {
-        "kind": kind,
-        "existence_logodds": logodds,
-        "p_exist": logistic(logodds),
-        "batches_observed": 1,
-    }
+def first_sighting(params: Params) -> float:
+    """Existence log-odds of a new hypothesis: the prior plus one positive observation (eq. (3))."""
+    return update_existence(params.existence.prior_logodds, params.existence, observed=True)
+
+
+def confirmed(
+    track_id: str,
+    frame_id: str | None,
+    p_exist: float,
+    center: Vec3,
+    batches: int,
+    *,
+    consensus: bool | None = None,
+    reason: Literal["verification", "inspection"] | None = None,
+) -> TrackConfirmed:
+    """Graph publication of a track."""
+    return TrackConfirmed(
+        track_id=track_id,
+        state="confirmed",
+        frame_id=frame_id,
+        p_exist=p_exist,
+        center=center,
+        batches_observed=batches,
+        consensus=consensus,
+        reason=reason,
+    )
 
 
 def added_object(
@@ -104,24 +137,29 @@ def added_object(
 ) -> list[Event]:
     """A new hypothesis (`add`), and its first support."""
     evidence = _parent_evidence({}, parents, params)
-    details = object_details(None, proposals, parents)
-    details.update(first_sighting("object", params), parent_evidence=evidence)
-    logodds = details["existence_logodds"]
-    frame_id = proposals[0].frame_id
-    emitted: list[Event] = [TrackAdded(track_id, "tentative", frame_id, details)]
-    lifecycle = "tentative"
+    embedding_sum, embedding_count = _embedding_sum(None, proposals)
+    logodds = first_sighting(params)
     p_exist = logistic(logodds)
-    if should_confirm(lifecycle, p_exist, 1, params.lifecycle):  # only when one batch may publish
-        lifecycle = "confirmed"
-        center = _vec(proposals[-1].center)
-        emitted.append(
-            TrackConfirmed(
-                track_id,
-                lifecycle,
-                frame_id,
-                {"p_exist": p_exist, "center": center, "batches_observed": 1},
-            )
+    frame_id = proposals[0].frame_id
+    emitted: list[Event] = [
+        ObjectAdded(
+            track_id=track_id,
+            state="tentative",
+            frame_id=frame_id,
+            observations=_observations(proposals, parents),
+            embedding_sum=embedding_sum,
+            embedding_count=embedding_count,
+            timestamp=float(proposals[-1].timestamp),
+            existence_logodds=logodds,
+            p_exist=p_exist,
+            batches_observed=1,
+            parent_evidence=evidence,
         )
+    ]
+    lifecycle: LifecycleState = "tentative"
+    if should_confirm("object", lifecycle, p_exist, 1, params):  # only when one batch may publish
+        lifecycle = "confirmed"
+        emitted.append(confirmed(track_id, frame_id, p_exist, vec3(proposals[-1].center), 1))
     return [*emitted, *_support_events(track_id, lifecycle, frame_id, None, evidence)]
 
 
@@ -140,77 +178,83 @@ def observed_object(
 ) -> list[Event]:
     """A positive batch: `update`, then `confirm`, `move` and `reparent` as they apply."""
     frame_id = proposals[-1].frame_id
-    lifecycle_params = params.lifecycle
-    reacquired, logodds, p_exist, batches, lifecycle = positive_batch(track, params)
-    center: Vec3 = (
-        float(proposals[-1].center[0]),
-        float(proposals[-1].center[1]),
-        float(proposals[-1].center[2]),
-    )
+    positive = positive_batch(track, params)
+    lifecycle = positive.lifecycle
+    center = vec3(proposals[-1].center)
     # Evidence about the old support is stale once the object was relocated.
-    relocated = reacquired or should_move(track.published_center, center, lifecycle_params)
+    relocated = positive.reacquired or should_move(track.published_center, center, params.lifecycle)
     evidence = _parent_evidence({} if relocated else track.parent_evidence, parents, params)
-    details = object_details(track, proposals, parents)
-    details.update(
-        existence_logodds=logodds,
-        p_exist=p_exist,
-        batches_observed=batches,
-        reacquired=reacquired,
-        parent_evidence=evidence,
-    )
-    emitted: list[Event] = [TrackUpdated(track.track_id, lifecycle, frame_id, details)]
-    if should_confirm(lifecycle, p_exist, batches, lifecycle_params):
+    embedding_sum, embedding_count = _embedding_sum(track, proposals)
+    emitted: list[Event] = [
+        ObjectObserved(
+            track_id=track.track_id,
+            state=lifecycle,
+            frame_id=frame_id,
+            observations=_observations(proposals, parents),
+            embedding_sum=embedding_sum,
+            embedding_count=embedding_count,
+            timestamp=float(proposals[-1].timestamp),
+            existence_logodds=positive.logodds,
+            p_exist=positive.p_exist,
+            batches_observed=positive.batches,
+            reacquired=positive.reacquired,
+            parent_evidence=evidence,
+        )
+    ]
+    if should_confirm("object", lifecycle, positive.p_exist, positive.batches, params):
         lifecycle = "confirmed"
         emitted.append(
-            TrackConfirmed(
-                track.track_id,
-                lifecycle,
-                frame_id,
-                {"p_exist": p_exist, "center": list(center), "batches_observed": batches},
-            )
+            confirmed(track.track_id, frame_id, positive.p_exist, center, positive.batches)
         )
     emitted.extend(_move_events(track, lifecycle, frame_id, center, params))
     emitted.extend(_support_events(track.track_id, lifecycle, frame_id, track.parent, evidence))
     return emitted
 
 
-def positive_batch(track: Track, params: Params) -> tuple[bool, float, float, int, str]:
-    """Equation (3) for a matched track: (re-acquired, log-odds, p_exist, batches, lifecycle).
+@dataclass(frozen=True)
+class PositiveBatch:
+    """Equation (3) for a matched track."""
 
-    A removed track that is re-acquired keeps its identity and restarts as a hypothesis.
-    """
+    reacquired: bool  # a removed track keeps its identity and restarts as a hypothesis
+    logodds: float
+    p_exist: float
+    batches: int  # distinct positive batches since (re)acquisition
+    lifecycle: LifecycleState
+
+
+def positive_batch(track: Track, params: Params) -> PositiveBatch:
+    """A positive batch for `track`: one observation's worth of existence evidence."""
     existence = params.existence
     reacquired = track.lifecycle == "removed"
     prior = existence.prior_logodds if reacquired else track.existence_logodds
     logodds = update_existence(prior, existence, observed=True)
-    batches = 1 if reacquired else track.batches_observed + 1
-    return (
-        reacquired,
-        logodds,
-        logistic(logodds),
-        batches,
-        "tentative" if reacquired else track.lifecycle,
+    return PositiveBatch(
+        reacquired=reacquired,
+        logodds=logodds,
+        p_exist=logistic(logodds),
+        batches=1 if reacquired else track.batches_observed + 1,
+        lifecycle="tentative" if reacquired else track.lifecycle,
     )
 
 
 def _move_events(
-    track: Track, lifecycle: str, frame_id: str, center: Vec3, params: Params
+    track: Track, lifecycle: LifecycleState, frame_id: str, center: Vec3, params: Params
 ) -> list[Event]:
-    if lifecycle != "confirmed" or not should_move(
-        track.published_center, center, params.lifecycle
+    published = track.published_center
+    if (
+        lifecycle != "confirmed"
+        or published is None
+        or not should_move(published, center, params.lifecycle)
     ):
         return []
-    assert track.published_center is not None
     return [
         TrackMoved(
-            track.track_id,
-            lifecycle,
-            frame_id,
-            {
-                "from": list(track.published_center),
-                "to": list(center),
-                "distance": moved_distance(track.published_center, center),
-            },
+            track_id=track.track_id,
+            state=lifecycle,
+            frame_id=frame_id,
+            moved_from=published,
+            to=center,
+            distance=moved_distance(published, center),
         )
     ]
 
@@ -223,28 +267,37 @@ def visible_miss(
     logodds = update_existence(track.existence_logodds, existence, visible_miss=True)
     p_exist = logistic(logodds)
     misses = track.visible_misses + 1
-    details = {
-        "evidence": "visible_miss",
-        "samples_passed": samples,
-        "samples_total": params.visibility.box_samples_per_axis**3,
-        "existence_logodds": logodds,
-        "p_exist": p_exist,
-        "visible_misses": misses,
-    }
     lifecycle = track.lifecycle
-    emitted: list[Event] = [TrackUpdated(track.track_id, lifecycle, frame_id, details)]
+    emitted: list[Event] = [
+        VisibleMiss(
+            track_id=track.track_id,
+            state=lifecycle,
+            frame_id=frame_id,
+            samples_passed=samples,
+            samples_total=params.visibility.box_samples_per_axis**3,
+            existence_logodds=logodds,
+            p_exist=p_exist,
+            visible_misses=misses,
+        )
+    ]
     if not removal:  # an append-only memory never resolves a disappearance
         return emitted
-    if not track.pinned and should_demote(
-        lifecycle, p_exist, lifecycle_params
-    ):  # pinned: never unpublished
-        lifecycle = "demoted"
-        emitted.append(TrackDemoted(track.track_id, lifecycle, frame_id, {"p_exist": p_exist}))
+    if not track.pinned and should_demote(lifecycle, p_exist, lifecycle_params):
+        lifecycle = "demoted"  # pinned fixtures are never unpublished
+        emitted.append(
+            TrackDemoted(
+                track_id=track.track_id, state=lifecycle, frame_id=frame_id, p_exist=p_exist
+            )
+        )
     if should_remove(lifecycle, p_exist, misses, track.pinned, lifecycle_params):
         lifecycle = "removed"
         emitted.append(
             TrackRemoved(
-                track.track_id, lifecycle, frame_id, {"p_exist": p_exist, "visible_misses": misses}
+                track_id=track.track_id,
+                state=lifecycle,
+                frame_id=frame_id,
+                p_exist=p_exist,
+                visible_misses=misses,
             )
         )
     return emitted
@@ -253,38 +306,42 @@ def visible_miss(
 # -- fixtures --------------------------------------------------------------------------------
 
 
-def fixture_details(proposal: FixtureProposal, center: Vec3, batch_frame: str) -> dict[str, Any]:
-    """One cluster's evidence for a fixture track, with the EMA center evolve stores."""
-    return {
-        "evidence": "observed",
-        "observations": [
-            {
-                "frame_id": proposal.best_frame or batch_frame,
-                "label": proposal.label,
-                "score": proposal.mean_score,
-                "center": _vec(proposal.center),
-                "extent": _vec(proposal.extent),
-                "valid_pixels": proposal.voxel_count,
-                "parent": None,
-            }
-        ],
-        "center": list(center),
-        "margin": proposal.margin,
-        "best_frame": proposal.best_frame,
-        "best_frame_support": proposal.contributed,
-        "embedding_sum": None,
-        "embedding_count": 0,
-    }
+def _fixture_observation(proposal: FixtureProposal, batch_frame: str) -> tuple[Observation, ...]:
+    """One cluster's evidence for a fixture track."""
+    return (
+        Observation(
+            frame_id=proposal.best_frame or batch_frame,
+            label=proposal.label,
+            score=proposal.mean_score,
+            center=vec3(proposal.center),
+            extent=vec3(proposal.extent),
+            valid_pixels=proposal.voxel_count,
+            parent=None,
+        ),
+    )
 
 
 def added_fixture(
     track_id: str, proposal: FixtureProposal, batch_frame: str, timestamp: float, params: Params
 ) -> list[Event]:
     """A new coarse fixture hypothesis."""
-    center: Vec3 = (float(proposal.center[0]), float(proposal.center[1]), float(proposal.center[2]))
-    details = fixture_details(proposal, center, batch_frame)
-    details.update(first_sighting("fixture", params), timestamp=timestamp)
-    return [TrackAdded(track_id, "tentative", proposal.best_frame or batch_frame, details)]
+    logodds = first_sighting(params)
+    return [
+        FixtureAdded(
+            track_id=track_id,
+            state="tentative",
+            frame_id=proposal.best_frame or batch_frame,
+            observations=_fixture_observation(proposal, batch_frame),
+            center=vec3(proposal.center),
+            margin=proposal.margin,
+            best_frame=proposal.best_frame,
+            best_frame_support=proposal.contributed,
+            existence_logodds=logodds,
+            p_exist=logistic(logodds),
+            batches_observed=1,
+            timestamp=timestamp,
+        )
+    ]
 
 
 def observed_fixture(
@@ -293,24 +350,34 @@ def observed_fixture(
     """Support from one more batch: `update`, then promotion or a verification request."""
     if track.verification == "rejected":
         return []  # a retired hypothesis explains its cluster and stays retired
-    reacquired, logodds, p_exist, batches, lifecycle = positive_batch(track, params)
+    positive = positive_batch(track, params)
+    lifecycle, batches, p_exist = positive.lifecycle, positive.batches, positive.p_exist
     center = (
-        (float(proposal.center[0]), float(proposal.center[1]), float(proposal.center[2]))
-        if reacquired
+        vec3(proposal.center)
+        if positive.reacquired
         else ema_center(track.center, proposal.center, params.fusion.fixture_center_alpha)
     )
     frame_id = proposal.best_frame or batch_frame
-    details = fixture_details(proposal, center, batch_frame)
-    details.update(
-        existence_logodds=logodds,
-        p_exist=p_exist,
-        batches_observed=batches,
-        reacquired=reacquired,
-        timestamp=timestamp,
-    )
+    best_frame, best_frame_support = proposal.best_frame, proposal.contributed
     if proposal.contributed <= track.best_frame_support:
-        details.update(best_frame=track.best_frame, best_frame_support=track.best_frame_support)
-    emitted: list[Event] = [TrackUpdated(track.track_id, lifecycle, frame_id, details)]
+        best_frame, best_frame_support = track.best_frame, track.best_frame_support
+    emitted: list[Event] = [
+        FixtureObserved(
+            track_id=track.track_id,
+            state=lifecycle,
+            frame_id=frame_id,
+            observations=_fixture_observation(proposal, batch_frame),
+            center=center,
+            margin=proposal.margin,
+            best_frame=best_frame,
+            best_frame_support=best_frame_support,
+            existence_logodds=positive.logodds,
+            p_exist=p_exist,
+            batches_observed=batches,
+            reacquired=positive.reacquired,
+            timestamp=timestamp,
+        )
+    ]
     # Promotion: several distinct batches, then the consensus gate or one verification.
     class_evidence = dict(track.class_evidence)
     class_evidence[proposal.label] = (
@@ -320,11 +387,7 @@ def observed_fixture(
     agreement = class_evidence[label] / sum(class_evidence.values())
     mean_margin = (track.margin_sum + proposal.margin) / max(batches, 1)
     fixture_params = params.fixtures
-    ready = (
-        lifecycle in ("tentative", "demoted")
-        and batches >= fixture_params.confirm_min_batches
-        and p_exist >= params.lifecycle.confirm_min_p_exist
-    )
+    ready = should_confirm("fixture", lifecycle, p_exist, batches, params)
     consensus = (
         agreement >= fixture_params.consensus_min_agreement
         and mean_margin >= fixture_params.consensus_min_margin
@@ -332,39 +395,25 @@ def observed_fixture(
     if ready and (consensus or track.verification == "confirmed"):
         lifecycle = "confirmed"
         emitted.append(
-            TrackConfirmed(
-                track.track_id,
-                lifecycle,
-                frame_id,
-                {
-                    "p_exist": p_exist,
-                    "center": list(center),
-                    "batches_observed": batches,
-                    "consensus": consensus,
-                },
-            )
+            confirmed(track.track_id, frame_id, p_exist, center, batches, consensus=consensus)
         )
     elif ready and track.verification is None:
         total = sum(class_evidence.values())
         emitted.append(
             VerificationRequested(
-                track.track_id,
-                lifecycle,
-                frame_id,
-                {
-                    # What a verifier needs: each class's mean similarity over the cluster,
-                    # and how the supporting batches voted.
-                    "candidates": dict(
-                        sorted(proposal.class_means.items(), key=lambda item: -item[1])
-                    ),
-                    "batch_votes": {
-                        name: weight / total for name, weight in sorted(class_evidence.items())
-                    },
-                    "agreement": agreement,
-                    "mean_margin": mean_margin,
-                    "batches_observed": batches,
-                    "best_frame": details["best_frame"],
+                track_id=track.track_id,
+                state=lifecycle,
+                frame_id=frame_id,
+                # What a verifier needs: each class's mean similarity over the cluster,
+                # and how the supporting batches voted.
+                candidates=dict(sorted(proposal.class_means.items(), key=lambda item: -item[1])),
+                batch_votes={
+                    name: weight / total for name, weight in sorted(class_evidence.items())
                 },
+                agreement=agreement,
+                mean_margin=mean_margin,
+                batches_observed=batches,
+                best_frame=best_frame,
             )
         )
     emitted.extend(_move_events(track, lifecycle, frame_id, center, params))

@@ -5,10 +5,11 @@ from __future__ import annotations
 from typing import Literal
 
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
-from core.events import Event, TrackConfirmed, TrackRemoved, TrackVerified
+from core.events import Event, TrackRemoved, TrackVerified
+from core.lifecycle import should_confirm
 from core.params import Params
 from core.state import SceneState, logistic
-from core.transitions import fixture_verdict_logodds
+from core.transitions import confirmed, fixture_verdict_logodds
 
 
 def decide_verdict(
@@ -41,48 +42,40 @@ def decide_verdict(
     confirm = verdict == "confirm"
     logodds = fixture_verdict_logodds(track, confirm, params)
     p_exist = logistic(logodds)
-    lifecycle = track.lifecycle
-    details = {
-        "verdict": verdict,
-        "label": label,
-        "source": source,
-        "frame_id": frame_id,
-        "existence_logodds": logodds,
-        "p_exist": p_exist,
-    }
-    events: list[Event] = [TrackVerified(track_id, lifecycle, frame_id, details)]
+    events: list[Event] = [
+        TrackVerified(
+            track_id=track_id,
+            state=track.lifecycle,
+            frame_id=frame_id,
+            verdict=verdict,
+            label=label,
+            source=source,
+            verdict_frame=frame_id,
+            existence_logodds=logodds,
+            p_exist=p_exist,
+        )
+    ]
     if not confirm:
         # Rejected hypotheses are retired: removed, and never re-acquired.
         events.append(
             TrackRemoved(
-                track_id,
-                "removed",
-                frame_id,
-                {"p_exist": p_exist, "reason": "verification_rejected"},
+                track_id=track_id,
+                state="removed",
+                frame_id=frame_id,
+                p_exist=p_exist,
+                reason="verification_rejected",
             )
         )
         return events
-    enough_batches = track.batches_observed >= (
-        params.fixtures.confirm_min_batches
-        if track.kind == "fixture"
-        else params.lifecycle.confirm_min_batches
-    )
-    if (
-        lifecycle != "confirmed"
-        and enough_batches
-        and p_exist >= params.lifecycle.confirm_min_p_exist
-    ):
+    if should_confirm(track.kind, track.lifecycle, p_exist, track.batches_observed, params):
         events.append(
-            TrackConfirmed(
+            confirmed(
                 track_id,
-                "confirmed",
                 frame_id,
-                {
-                    "p_exist": p_exist,
-                    "center": list(track.center),
-                    "batches_observed": track.batches_observed,
-                    "reason": "verification",
-                },
+                p_exist,
+                track.center,
+                track.batches_observed,
+                reason="verification",
             )
         )
     return events

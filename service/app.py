@@ -9,7 +9,9 @@ from fastapi import FastAPI
 
 from api_schema import Health
 from service.bootstrap import Container, build_container
-from service.errors import BodySizeLimit, install_problem_handlers
+from service.errors import install_problem_handlers
+from service.middleware.body_limit import BodySizeLimit
+from service.middleware.unexpected import UnexpectedErrors
 from service.routes import (
     baselines,
     batches,
@@ -55,6 +57,7 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.state.states = StateReader(container.log)
     install_problem_handlers(app)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
+    app.add_middleware(UnexpectedErrors)  # outermost of ours: a 500 keeps the connection
     for module in (scenes, batches, graph, events, tracks, verifications, baselines, inspections):
         app.include_router(module.router)
 

@@ -13,6 +13,7 @@ from service.store.blobs import BlobStore, FileBlobStore
 from service.store.engine import make_engine, migrate
 from service.store.event_log import EventLog
 from service.store.queue import BatchQueue
+from service.store.unit_of_work import UnitOfWork
 
 
 @dataclass
@@ -24,6 +25,7 @@ class Container:
     log: EventLog
     queue: BatchQueue
     blobs: BlobStore
+    uow: UnitOfWork  # the one write path of the log
 
 
 def build_container(
@@ -39,10 +41,13 @@ def build_container(
     engine = engine or make_engine(settings.resolved_database_url())
     if migrate_schema:
         migrate(engine)
+    log = EventLog(engine, clock)
+    queue = BatchQueue(engine, clock)
     return Container(
         settings=settings,
         engine=engine,
-        log=EventLog(engine, clock),
-        queue=BatchQueue(engine, clock),
+        log=log,
+        queue=queue,
         blobs=blobs or FileBlobStore(settings.data_dir / "blobs"),
+        uow=UnitOfWork(engine, log, queue, settings.snapshot_interval),
     )

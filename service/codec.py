@@ -14,6 +14,7 @@ import orjson
 from PIL import Image
 
 from api_schema import BatchIn, DepthImage, DetectionIn, FrameIn, RleMask
+from core.errors import PbdagError
 from core.observation import Batch, Detection, Frame, Intrinsics
 
 __all__ = [
@@ -32,12 +33,11 @@ POSE_LAST_ROW_ATOL = 1e-6
 ROTATION_ATOL = 1e-3
 
 
-class InvalidObservation(Exception):
+class InvalidObservation(PbdagError):
     """A structurally valid observation whose content cannot be decoded or is not physical."""
 
     def __init__(self, field: str, reason: str) -> None:
-        super().__init__(f"{field}: {reason}")
-        self.field = field
+        super().__init__(f"{field}: {reason}", field)
         self.reason = reason
 
 

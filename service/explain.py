@@ -2,18 +2,22 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections import Counter
+from collections.abc import Iterable, Sequence
 
 from api_schema import Explanation, Removal, VisibleMiss
-from service.routes.events import event_out
+from core.events import Event, Sighting, TrackRemoved
+from core.events import VisibleMiss as MissEvent
 from service.store.event_log import StoredEvent
+from service.wire import event_out
 
 
-def explain(track_id: str, events: Sequence[StoredEvent]) -> Explanation:
+def explain(track_id: str, stored: Sequence[StoredEvent]) -> Explanation:
     """The track's history, and for a removal the visible misses that led to it."""
-    last = events[-1]
+    events = [(row.seq, row.to_core()) for row in stored]
+    last = events[-1][1]
     state = last.state or "unknown"
-    label = _label(events)
+    label = _label(event for _seq, event in events)
     removal = _removal(events) if state == "removed" else None
     if removal is not None:
         summary = (
@@ -22,57 +26,58 @@ def explain(track_id: str, events: Sequence[StoredEvent]) -> Explanation:
             f"p_exist fell to {removal.p_exist:.3f}."
         )
     else:
-        seen = [
-            e
-            for e in events
-            if e.type in ("add", "update") and e.details.get("evidence") == "observed"
-        ]
-        where = f", last observed in frame {seen[-1].frame_id} (seq {seen[-1].seq})" if seen else ""
-        p_exist = next(
-            (e.details["p_exist"] for e in reversed(events) if "p_exist" in e.details), None
+        seen = [(seq, event) for seq, event in events if isinstance(event, Sighting)]
+        where = (
+            f", last observed in frame {seen[-1][1].frame_id} (seq {seen[-1][0]})" if seen else ""
         )
+        p_exist = next((e.p_exist for _s, e in reversed(events) if hasattr(e, "p_exist")), None)
         chance = f" with p_exist {p_exist:.3f}" if p_exist is not None else ""
         summary = f"{track_id} ({label}) is {state}{chance}{where}."
     return Explanation(
         track_id=track_id,
         state=state,
         summary=summary,
-        events=[event_out(e) for e in events],
+        events=[event_out(row) for row in stored],
         removal=removal,
     )
 
 
-def _label(events: Sequence[StoredEvent]) -> str:
+def _label(events: Iterable[Event]) -> str:
     """The label most observations gave."""
-    counts: dict[str, int] = {}
-    for event in events:
-        for observation in event.details.get("observations", ()):
-            counts[observation["label"]] = counts.get(observation["label"], 0) + 1
+    counts = Counter(
+        observation.label
+        for event in events
+        if isinstance(event, Sighting)
+        for observation in event.observations
+    )
     return min(counts.items(), key=lambda item: (-item[1], item[0]))[0] if counts else "unknown"
 
 
-def _removal(events: Sequence[StoredEvent]) -> Removal | None:
+def _removal(events: Sequence[tuple[int, Event]]) -> Removal | None:
     """The last `remove` and the misses since the last positive observation before it."""
-    removal_index = max((i for i, e in enumerate(events) if e.type == "remove"), default=None)
-    if removal_index is None:
+    index = max(
+        (i for i, (_s, e) in enumerate(events) if isinstance(e, TrackRemoved)), default=None
+    )
+    if index is None:
         return None
     misses: list[VisibleMiss] = []
-    for event in reversed(events[:removal_index]):
-        if event.type == "add" or event.details.get("evidence") == "observed":
+    for seq, event in reversed(events[:index]):
+        if isinstance(event, Sighting):
             break
-        if event.details.get("evidence") == "visible_miss":
+        if isinstance(event, MissEvent):
             misses.append(
                 VisibleMiss(
-                    seq=event.seq,
+                    seq=seq,
                     frame_id=event.frame_id,
-                    samples_passed=int(event.details["samples_passed"]),
-                    p_exist_after=float(event.details["p_exist"]),
+                    samples_passed=event.samples_passed,
+                    p_exist_after=event.p_exist,
                 )
             )
-    removed = events[removal_index]
+    seq, removed = events[index]
+    assert isinstance(removed, TrackRemoved)
     return Removal(
-        seq=removed.seq,
+        seq=seq,
         frame_id=removed.frame_id,
-        p_exist=float(removed.details["p_exist"]),
+        p_exist=removed.p_exist,
         visible_misses=list(reversed(misses)),
     )

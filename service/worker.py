@@ -11,13 +11,10 @@ from collections import OrderedDict
 
 from api_schema import BatchIn
 from core.decide import decide
-from core.evolve import fold
 from core.state import SceneState
 from service.bootstrap import Container
 from service.codec import decode_batch
-from service.store.engine import write_transaction
 from service.store.errors import ConcurrencyConflict, LeaseLost
-from service.store.projection import project_append
 from service.store.queue import Claim
 
 logger = logging.getLogger("pbdag.worker")
@@ -74,23 +71,9 @@ class Worker:
             batch = decode_batch(BatchIn.model_validate_json(body))
             state = self._state(claim.scene_id)
             events = decide(state, batch)
-            new_state = fold(state, events)
-            with write_transaction(container.engine) as connection:
-                seqs = container.log.append(
-                    connection, claim.scene_id, state.head_seq, events, claim.batch_id
-                )
-                if seqs is not None:
-                    project_append(
-                        connection,
-                        container.log,
-                        claim.scene_id,
-                        state,
-                        events,
-                        new_state,
-                        seqs[0],
-                        container.settings.snapshot_interval,
-                    )
-                container.queue.complete(connection, claim, seqs)
+            with container.uow.begin() as work:
+                appended = work.append(claim.scene_id, state, events, batch_id=claim.batch_id)
+                work.complete(claim, appended.seqs)
         except LeaseLost:
             self._states.pop(claim.scene_id, None)
             logger.warning("worker %s lost the lease of batch %s", self.name, claim.batch_id)
@@ -104,7 +87,7 @@ class Worker:
             logger.exception("worker %s: batch %s failed", self.name, claim.batch_id)
             self._fail(claim, f"{type(error).__name__}: {error}")
             return
-        self._remember(claim.scene_id, new_state)
+        self._remember(claim.scene_id, appended.state)
 
     def _fail(self, claim: Claim, error: str) -> None:
         try:

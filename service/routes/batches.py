@@ -3,21 +3,18 @@
 from __future__ import annotations
 
 import hashlib
+from typing import Annotated
 
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Path, Response
 
 from api_schema import BatchIn, BatchStatus
 from service.codec import canonical_json, decode_batch
-from service.deps import ContainerDep
+from service.deps import ContainerDep, SceneDep
 from service.errors import NotFound
-from service.store.queue import BatchRecord
+from service.wire import batch_out
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}/batches", tags=["batches"])
-
-
-def batch_out(record: BatchRecord) -> BatchStatus:
-    """Wire form of a queue row."""
-    return BatchStatus.model_validate(record, from_attributes=True)
+BatchId = Annotated[str, Path(min_length=1, max_length=200, pattern=r"^[A-Za-z0-9._:-]+$")]
 
 
 @router.post(
@@ -27,17 +24,16 @@ def batch_out(record: BatchRecord) -> BatchStatus:
     responses={200: {"model": BatchStatus, "description": "The same batch was already accepted."}},
 )
 def post_batch(
-    scene_id: str, batch: BatchIn, response: Response, container: ContainerDep
+    scene: SceneDep, batch: BatchIn, response: Response, container: ContainerDep
 ) -> BatchStatus:
     """Validate and durably queue a batch (202); the same batch_id and content again returns the original (200)."""
-    container.log.scene(scene_id)  # 404 before any work
     decode_batch(batch)  # 422 naming the field; nothing is stored for a bad batch
     # The blob is the canonical JSON, so its key is the content hash used for idempotency.
     content = canonical_json(batch.model_dump(mode="json"))
     content_sha256 = hashlib.sha256(content).hexdigest()
     blob_key = container.blobs.put(content)
     record, created = container.queue.submit(
-        scene_id, batch.batch_id, content_sha256, blob_key, len(batch.frames)
+        scene.id, batch.batch_id, content_sha256, blob_key, len(batch.frames)
     )
     if not created:
         response.status_code = 200
@@ -45,10 +41,9 @@ def post_batch(
 
 
 @router.get("/{batch_id}", response_model=BatchStatus)
-def get_batch(scene_id: str, batch_id: str, container: ContainerDep) -> BatchStatus:
+def get_batch(scene: SceneDep, batch_id: BatchId, container: ContainerDep) -> BatchStatus:
     """Status of one batch and the seq range it appended."""
-    container.log.scene(scene_id)
-    record = container.queue.get(scene_id, batch_id)
+    record = container.queue.get(scene.id, batch_id)
     if record is None:
-        raise NotFound("batch", batch_id)
+        raise NotFound("batch", batch_id, "batch_id")
     return batch_out(record)

@@ -8,16 +8,14 @@ from fastapi import APIRouter, Query
 
 from api_schema import Graph
 from core.graph import graph_to_dict, pending_verifications, publish
-from service.deps import StatesDep
+from service.deps import AsOf, SceneDep, StatesDep
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["graph"])
-
-AsOf = Annotated[int | None, Query(ge=0, description="Seq to travel back to (default: the head).")]
 
 
 @router.get("/graph", response_model=Graph)
 def get_graph(
-    scene_id: str,
+    scene: SceneDep,
     states: StatesDep,
     as_of: AsOf = None,
     include: Annotated[
@@ -25,16 +23,18 @@ def get_graph(
         Query(description="`all` adds hypotheses, demoted and removed tracks."),
     ] = "published",
     parent: Annotated[
-        str | None, Query(description="Only nodes whose support parent is this track.")
+        str | None, Query(max_length=64, description="Only nodes whose support parent is this.")
     ] = None,
-    label: Annotated[str | None, Query(description="Only nodes of this class.")] = None,
+    label: Annotated[
+        str | None, Query(max_length=200, description="Only nodes of this class.")
+    ] = None,
 ) -> Graph:
     """The graph at `as_of` (default now): confirmed nodes, or every track with include=all."""
-    state = states.state(scene_id, as_of)
+    state = states.state(scene.id, as_of)
     graph = publish(state, include_all=include == "all", parent=parent, label=label)
     return Graph.model_validate(
         {
-            "scene_id": scene_id,
+            "scene_id": scene.id,
             "seq": state.head_seq,
             "pending_verifications": pending_verifications(state),
             **graph_to_dict(graph),

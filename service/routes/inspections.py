@@ -13,52 +13,48 @@ from api_schema import (
     InspectionQueue,
     InspectionQueueItem,
 )
+from core.events import InspectionRecorded
 from core.inspection import decide_inspection
 from service.codec import decode_frames
 from service.commands import run_command
-from service.deps import ContainerDep, StatesDep
-from service.store.event_log import StoredEvent
+from service.deps import ContainerDep, SceneDep, StatesDep
+from service.wire import inspection_out
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["inspections"])
 
 
-def inspection_out(event: StoredEvent) -> Inspection:
-    """A ledger entry from its event."""
-    return Inspection.model_validate({"seq": event.seq, **event.details})
-
-
 @router.post("/inspections", status_code=201, response_model=Inspection)
-def post_inspection(scene_id: str, body: InspectionIn, container: ContainerDep) -> Inspection:
+def post_inspection(scene: SceneDep, body: InspectionIn, container: ContainerDep) -> Inspection:
     """Ground the primary view's objects on the fixture, attach them as its children, record the capture."""
-    container.log.scene(scene_id)
     frames = decode_frames(body.frames)  # 422 naming the field; nothing is appended
     capture_id = body.capture_id or f"cap-{uuid.uuid4().hex[:12]}"
-    _state, _events, seqs = run_command(
+    events, appended = run_command(
         container,
-        scene_id,
+        scene.id,
         lambda head: decide_inspection(
             head, capture_id, body.fixture_id, frames, body.fixture_verified
         ),
     )
-    assert seqs is not None
-    return inspection_out(container.log.read(scene_id, after=seqs[1] - 1, up_to=seqs[1])[0])
+    record = events[-1]
+    assert isinstance(record, InspectionRecorded) and appended.seqs is not None
+    return inspection_out(appended.seqs[1], record)
 
 
 @router.get("/inspections", response_model=InspectionList)
-def list_inspections(scene_id: str, container: ContainerDep) -> InspectionList:
+def list_inspections(scene: SceneDep, container: ContainerDep) -> InspectionList:
     """The capture ledger: every inspection with its frames, outcome and children."""
-    container.log.scene(scene_id)
-    return InspectionList(
-        inspections=[
-            inspection_out(e) for e in container.log.read(scene_id, event_type="inspection")
-        ]
-    )
+    ledger = []
+    for stored in container.log.read(scene.id, event_type="inspection"):
+        event = stored.to_core()
+        assert isinstance(event, InspectionRecorded)
+        ledger.append(inspection_out(stored.seq, event))
+    return InspectionList(inspections=ledger)
 
 
 @router.get("/inspection-queue", response_model=InspectionQueue)
-def inspection_queue(scene_id: str, states: StatesDep) -> InspectionQueue:
+def inspection_queue(scene: SceneDep, states: StatesDep) -> InspectionQueue:
     """Confirmed fixtures of the inspection taxonomy whose close-range inspection is unresolved."""
-    state = states.state(scene_id)
+    state = states.state(scene.id)
     taxonomy = set(state.params.fixtures.inspection_taxonomy)
     return InspectionQueue(
         fixtures=[

@@ -5,47 +5,32 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from api_schema import Scene, SceneCreate, SceneList
+from core.events import BaselineSource
 from core.params import Params
-from service.commands import create_scene_from_baseline
-from service.deps import ContainerDep
-from service.errors import FieldError, ProblemError
-from service.routes.baselines import read_package
-from service.store.event_log import SceneRecord
+from service.commands import create_scene
+from service.deps import ContainerDep, SceneDep
+from service.errors import NotFound
+from service.store.baselines import read_package
+from service.wire import scene_out
 
 router = APIRouter(prefix="/v1/scenes", tags=["scenes"])
 
 
-class InvalidParams(ProblemError):
-    """A parameter override that does not fit the method's parameter tree."""
-
-    status = 422
-    title = "Invalid parameters"
-    type = "/problems/invalid-params"
-
-
-def scene_out(record: SceneRecord) -> Scene:
-    """Wire form of a scene row."""
-    return Scene.model_validate(record, from_attributes=True)
-
-
 @router.post("", status_code=201, response_model=Scene)
-def create_scene(body: SceneCreate, container: ContainerDep) -> Scene:
+def post_scene(body: SceneCreate, container: ContainerDep) -> Scene:
     """Create a scene; its parameters (defaults plus overrides) are recorded as event 0."""
-    try:
-        params = Params.from_dict(body.params)
-    except ValueError as error:
-        field = str(error).split(":", 1)[0]
-        raise InvalidParams(
-            str(error), field=field, errors=[FieldError(field, str(error))]
-        ) from error
+    params = Params.from_dict(body.params)  # InvalidParams (422) names the field
     if body.baseline is None:
-        return scene_out(container.log.create_scene(body.name, params))
+        return scene_out(create_scene(container, body.name, params))
     # A later session in the same house: the package's fixtures keep their identities.
-    source = read_package(container, body.baseline.scene_id, body.baseline.version)
-    reference = {"scene_id": source.scene_id, "version": source.version, "sha256": source.sha256}
-    return scene_out(
-        create_scene_from_baseline(container, body.name, params, source.package, reference)
-    )
+    container.log.scene(body.baseline.scene_id)
+    stored = read_package(container.engine, body.baseline.scene_id, body.baseline.version)
+    if stored is None:
+        raise NotFound(
+            "baseline", f"{body.baseline.scene_id} v{body.baseline.version}", "baseline.version"
+        )
+    source = BaselineSource(scene_id=stored.scene_id, version=stored.version, sha256=stored.sha256)
+    return scene_out(create_scene(container, body.name, params, stored.package, source))
 
 
 @router.get("", response_model=SceneList)
@@ -55,6 +40,6 @@ def list_scenes(container: ContainerDep) -> SceneList:
 
 
 @router.get("/{scene_id}", response_model=Scene)
-def get_scene(scene_id: str, container: ContainerDep) -> Scene:
+def get_scene(scene: SceneDep) -> Scene:
     """One scene with its head seq and parameters."""
-    return scene_out(container.log.scene(scene_id))
+    return scene_out(scene)

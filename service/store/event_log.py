@@ -16,12 +16,12 @@ import numpy as np
 import orjson
 import sqlalchemy as sa
 
-from core.events import EVENT_TYPES, Event, SceneCreated, event_from_record
+from core.events import BaselineSource, Event, SceneCreated, event_from_record, non_finite_field
 from core.evolve import fold
 from core.params import Params
 from core.state import SNAPSHOT_FORMAT_VERSION, SceneState
-from service.store.engine import read_transaction, write_transaction
-from service.store.errors import ConcurrencyConflict, SceneNotFound, SeqOutOfRange
+from service.store.engine import read_transaction
+from service.store.errors import ConcurrencyConflict, NonFiniteEvent, SceneNotFound, SeqOutOfRange
 from service.store.tables import events, scenes, snapshots
 
 READ_PAGE = 5000
@@ -106,14 +106,16 @@ def gc_paused() -> Iterator[None]:
             gc.enable()
 
 
-def _core_event(row: sa.Row[Any]) -> Event:
+def _core_event(row: sa.Row[Any, Any, Any, Any, Any]) -> Event:
     """A log row straight to its core event (the as_of path skips StoredEvent)."""
-    cls = EVENT_TYPES[row.type]
-    return cls(
-        track_id=row.track_id,
-        state=row.state,
-        frame_id=row.frame_id,
-        details=orjson.loads(row.details),
+    return event_from_record(
+        {
+            "type": row.type,
+            "track_id": row.track_id,
+            "state": row.state,
+            "frame_id": row.frame_id,
+            "details": orjson.loads(row.details),
+        }
     )
 
 
@@ -155,32 +157,24 @@ class EventLog:
 
     # -- scenes -------------------------------------------------------------------------------
 
-    def create_scene(self, name: str, params: Params, scene_id: str | None = None) -> SceneRecord:
-        """A new scene whose log starts with `scene_created` (seq 0) recording its parameters."""
-        with write_transaction(self.engine) as connection:
-            return self.insert_scene(connection, name, params, scene_id)[0]
-
     def insert_scene(
         self,
         connection: sa.Connection,
         name: str,
         params: Params,
         scene_id: str | None = None,
-        baseline: dict[str, Any] | None = None,
+        baseline: BaselineSource | None = None,
     ) -> tuple[SceneRecord, SceneCreated]:
-        """Insert the scene row and its event 0 inside the caller's transaction."""
+        """Insert the scene row and its event 0 (`scene_created`, recording the parameters)."""
         scene_id = scene_id or f"scn-{uuid.uuid4().hex[:12]}"
         now = self.clock()
         params_json = orjson.dumps(params.to_dict(), option=orjson.OPT_SORT_KEYS).decode()
-        details: dict[str, Any] = {"name": name, "params": params.to_dict()}
-        if baseline is not None:
-            details["baseline"] = baseline
         connection.execute(
             scenes.insert().values(
                 id=scene_id, name=name, params=params_json, head_seq=0, created_at=now
             )
         )
-        created = SceneCreated(None, None, None, details)
+        created = SceneCreated(name=name, params=params.to_dict(), baseline=baseline)
         connection.execute(events.insert(), [self._event_row(scene_id, 0, created, None, now)])
         return SceneRecord(scene_id, name, params.to_dict(), 0, now), created
 
@@ -209,6 +203,14 @@ class EventLog:
     def _event_row(
         self, scene_id: str, seq: int, event: Event, batch_id: str | None, now: float
     ) -> dict[str, Any]:
+        details = event.details()
+        bad = non_finite_field(details)
+        if bad is not None:  # orjson would store null, and the log could not be replayed
+            raise NonFiniteEvent(
+                f"{event.type} event of {event.track_id or 'the scene'} has a non-finite number "
+                f"at {bad}; nothing was appended",
+                field=bad,
+            )
         return {
             "scene_id": scene_id,
             "seq": seq,
@@ -218,7 +220,7 @@ class EventLog:
             "batch_id": batch_id,
             "frame_id": event.frame_id,
             "recorded_at": now,
-            "details": orjson.dumps(dict(event.details)).decode(),
+            "details": orjson.dumps(details).decode(),
         }
 
     def append(

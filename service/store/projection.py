@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -10,11 +10,11 @@ import orjson
 import sqlalchemy as sa
 
 from core.baseline import baseline_package, canonical_bytes, package_sha256
-from core.events import BaselineFrozen, Event, touched_tracks
-from core.evolve import evolve, fold
+from core.events import BaselineFrozen, Event
+from core.evolve import fold
 from core.state import SceneState, Track
 from service.store.engine import read_transaction, write_transaction
-from service.store.event_log import SNAPSHOT_VERSION, EventLog, encode_snapshot, snapshot_due
+from service.store.event_log import SNAPSHOT_VERSION, EventLog, encode_snapshot
 from service.store.tables import baselines, snapshots, tracks
 
 
@@ -41,7 +41,7 @@ def last_seq_by_track(first_seq: int, new_events: Iterable[Event]) -> dict[str, 
     """For each track touched by events numbered from `first_seq`, the seq of its last event."""
     touched: dict[str, int] = {}
     for offset, event in enumerate(new_events):
-        for track_id in touched_tracks(event):
+        for track_id in event.touched_tracks():
             touched[track_id] = first_seq + offset
     return touched
 
@@ -69,44 +69,16 @@ def write_baseline(
     seq: int,
 ) -> bytes:
     """Store the package a freeze event names, rebuilt from the state just before it."""
-    package = baseline_package(state_before, scene_id, int(event.details["version"]), seq)
+    package = baseline_package(state_before, scene_id, event.version, seq)
     body = canonical_bytes(package)
-    if package_sha256(package) != event.details["sha256"]:
-        raise ValueError(
-            f"baseline {event.details['version']} of {scene_id}: package differs from its event"
-        )
+    if package_sha256(package) != event.sha256:
+        raise ValueError(f"baseline {event.version} of {scene_id}: package differs from its event")
     connection.execute(
         baselines.insert().values(
-            scene_id=scene_id,
-            version=package["version"],
-            seq=seq,
-            sha256=event.details["sha256"],
-            body=body,
+            scene_id=scene_id, version=event.version, seq=seq, sha256=event.sha256, body=body
         )
     )
     return body
-
-
-def project_append(
-    connection: sa.Connection,
-    log: EventLog,
-    scene_id: str,
-    state_before: SceneState,
-    new_events: Sequence[Event],
-    state_after: SceneState,
-    first_seq: int,
-    snapshot_interval: int,
-) -> None:
-    """Every projection of an append, in the append's transaction: tracks, packages, snapshot."""
-    write_tracks(connection, scene_id, state_after, last_seq_by_track(first_seq, new_events))
-    if any(isinstance(event, BaselineFrozen) for event in new_events):
-        state = state_before
-        for offset, event in enumerate(new_events):
-            if isinstance(event, BaselineFrozen):
-                write_baseline(connection, scene_id, state, event, first_seq + offset)
-            state = evolve(state, event)
-    if snapshot_due(state_before.head_seq, state_after.head_seq, snapshot_interval):
-        log.save_snapshot(connection, scene_id, state_after)
 
 
 def query_tracks(
@@ -116,8 +88,8 @@ def query_tracks(
     label: str | None = None,
     state: str | None = None,
     parent: str | None = None,
-) -> list[dict[str, Any]]:
-    """Projection rows of a scene, filtered by label, lifecycle state or parent."""
+) -> list[tuple[int, Track]]:
+    """(seq of its last event, track) of a scene's projection rows, by label, state or parent."""
     query = sa.select(tracks).where(tracks.c.scene_id == scene_id)
     if label is not None:
         query = query.where(tracks.c.label == label)
@@ -127,7 +99,7 @@ def query_tracks(
         query = query.where(tracks.c.parent == parent)
     with read_transaction(engine) as connection:
         rows = connection.execute(query.order_by(tracks.c.track_id)).all()
-    return [dict(row._mapping) for row in rows]
+    return [(row.updated_seq, Track.from_dict(orjson.loads(row.belief))) for row in rows]
 
 
 @dataclass
@@ -179,7 +151,7 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
             frozen.append((state, event, stored.seq))
         batch.append(event)
         count += 1
-        for track_id in touched_tracks(event):
+        for track_id in event.touched_tracks():
             touched[track_id] = stored.seq
         if pending and stored.seq == pending[0]:
             state = fold(state, batch)
@@ -192,9 +164,9 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
         connection.execute(sa.delete(baselines).where(baselines.c.scene_id == scene_id))
         write_tracks(connection, scene_id, state, touched)
         new_baselines = {
-            int(event.details["version"]): (
+            event.version: (
                 seq,
-                str(event.details["sha256"]),
+                event.sha256,
                 write_baseline(connection, scene_id, before, event, seq),
             )
             for before, event, seq in frozen

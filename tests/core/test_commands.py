@@ -66,7 +66,7 @@ def test_verdict_errors_name_the_field():
 def test_freeze_pins_and_a_new_session_keeps_the_identities():
     state = discover()
     events, package = decide_freeze(state, "scn-a")
-    assert events[0].details["sha256"] == package_sha256(package)
+    assert events[0].details()["sha256"] == package_sha256(package)
     frozen = fold(state, events)
     ids = sorted(f["track_id"] for f in package["fixtures"])
     assert all(frozen.tracks[i].pinned for i in ids)
@@ -87,11 +87,11 @@ def test_inspection_grounds_children_on_the_fixture_only():
     view = frame(world, (2.0, 1.2, 1.5), (2.0, 2.0, 0.75), "insp")
     events = decide_inspection(state, "cap-1", table.track_id, [view], True)
     record = events[-1]
-    assert record.type == "inspection" and record.details["outcome"] == "completed"
+    assert record.type == "inspection" and record.details()["outcome"] == "completed"
     after = fold(state, events)
-    labels = sorted(after.tracks[c].label for c in record.details["children"])
+    labels = sorted(after.tracks[c].label for c in record.details()["children"])
     assert labels == ["book", "mug"]
-    assert all(after.tracks[c].parent == table.track_id for c in record.details["children"])
+    assert all(after.tracks[c].parent == table.track_id for c in record.details()["children"])
     assert after.tracks[table.track_id].inspection_status == "completed"
 
 

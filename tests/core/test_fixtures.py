@@ -89,13 +89,13 @@ def test_conflicting_class_scores_wait_for_verification():
     table = state.tracks[requested[0].track_id]
     assert table.lifecycle == "tentative" and table.verification == "pending"
     assert (
-        "table" in requested[0].details["candidates"]
-        and "desk" in requested[0].details["candidates"]
+        "table" in requested[0].details()["candidates"]
+        and "desk" in requested[0].details()["candidates"]
     )
     assert not any(e.type == "confirm" and e.track_id == table.track_id for e in events)
     assert (
-        requested[0].details["candidates"]["table"]
-        > requested[0].details["candidates"]["desk"]
+        requested[0].details()["candidates"]["table"]
+        > requested[0].details()["candidates"]["desk"]
         > 0.4
     )
 
@@ -111,6 +111,6 @@ def test_mug_on_the_table_gets_the_table_as_parent_and_carried_to_the_counter_re
     reparents = [e for e in events if e.type == "reparent"]
     assert len(reparents) == 1
     assert reparents[0].track_id == mug.track_id
-    assert reparents[0].details == {"old_parent": table_id, "new_parent": counter_id}
+    assert reparents[0].details() == {"old_parent": table_id, "new_parent": counter_id}
     assert state.tracks[mug.track_id].parent == counter_id
     assert [t.track_id for t in state.tracks.values() if t.label == "mug"] == [mug.track_id]

@@ -48,7 +48,7 @@ def test_two_frames_of_one_batch_confirm_nothing():
     state, per_batch = run(SceneState(), [double])
     assert types(per_batch[0]) == ["add"]
     assert state.tracks["trk-000001"].batches_observed == 1
-    assert len(per_batch[0][0].details["observations"]) == 2
+    assert len(per_batch[0][0].details()["observations"]) == 2
 
 
 def test_taken_away_in_view_is_removed_after_visible_misses():
@@ -57,9 +57,9 @@ def test_taken_away_in_view_is_removed_after_visible_misses():
     flat = [e for events in per_batch for e in events]
     removed = [e for e in flat if e.type == "remove"]
     assert len(removed) == 1
-    misses = [e for e in flat if e.type == "update" and e.details["evidence"] == "visible_miss"]
+    misses = [e for e in flat if e.type == "update" and e.details()["evidence"] == "visible_miss"]
     assert len(misses) >= 3
-    assert removed[0].details["p_exist"] <= 0.12
+    assert removed[0].details()["p_exist"] <= 0.12
     assert types(flat).index("demote") < types(flat).index("remove")
     assert state.tracks["trk-000001"].lifecycle == "removed"
 
@@ -102,7 +102,7 @@ def test_small_motion_emits_move_with_same_identity():
     assert types(per_batch[0]) == ["update", "move"]
     move = per_batch[0][1]
     assert move.track_id == "trk-000001"
-    assert move.details["distance"] >= 0.35
+    assert move.details()["distance"] >= 0.35
     assert list(state.tracks) == ["trk-000001"]
 
 
@@ -150,7 +150,7 @@ def test_removed_track_regains_identity_on_reassociation():
     state, _ = run(state, [scene_batch(f"m{i}", MUG, detect=set()) for i in range(12)])
     assert state.tracks["trk-000001"].lifecycle == "removed"
     state, per_batch = run(state, [scene_batch(f"r{i}", MUG) for i in range(2)])
-    assert per_batch[0][0].details["reacquired"] is True
+    assert per_batch[0][0].details()["reacquired"] is True
     assert types(per_batch[1]) == ["update", "confirm"]
     assert list(state.tracks) == ["trk-000001"]
     assert state.tracks["trk-000001"].lifecycle == "confirmed"
@@ -188,7 +188,7 @@ def test_boundary_leak_does_not_drag_the_center():
         ),
     )
     events = decide(SceneState(), leaky)
-    center = events[0].details["observations"][0]["center"]
+    center = events[0].details()["observations"][0]["center"]
     assert np.count_nonzero(leaked) > 2 * np.count_nonzero(frame.detections[0].mask) - 10
     assert math.dist(center, (0.2, 0.1, 1.93)) < 0.03
 
@@ -196,10 +196,10 @@ def test_boundary_leak_does_not_drag_the_center():
 def test_decide_is_deterministic():
     batches = [scene_batch(f"b{i}", MUG) for i in range(3)]
     first = [
-        [(e.type, e.track_id, dict(e.details)) for e in ev] for ev in run(SceneState(), batches)[1]
+        [(e.type, e.track_id, e.details()) for e in ev] for ev in run(SceneState(), batches)[1]
     ]
     second = [
-        [(e.type, e.track_id, dict(e.details)) for e in ev] for ev in run(SceneState(), batches)[1]
+        [(e.type, e.track_id, e.details()) for e in ev] for ev in run(SceneState(), batches)[1]
     ]
     assert first == second
 
@@ -254,7 +254,7 @@ def test_without_persistent_identity_a_returning_object_gets_a_new_identity():
     )
     events = decide(state, at_time(scene_batch("back", MUG), 5.0), rules=rules)
     assert (events[0].type, events[0].track_id) == ("add", "trk-000002")
-    assert [(e.type, e.details["evidence"]) for e in events[1:]] == [("update", "visible_miss")]
+    assert [(e.type, e.details()["evidence"]) for e in events[1:]] == [("update", "visible_miss")]
     # with the paper's rules the same return keeps the identity
     assert decide(state, at_time(scene_batch("back", MUG), 5.0))[0].track_id == "trk-000001"
 

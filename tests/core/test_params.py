@@ -2,6 +2,7 @@
 
 import pytest
 
+from core.errors import InvalidParams
 from core.params import Params
 
 
@@ -44,20 +45,52 @@ def test_round_trip_and_partial_override():
 
 
 @pytest.mark.parametrize(
-    ("overrides", "message"),
+    ("overrides", "field", "reason"),
     [
-        ({"nope": 1}, "params.nope: unknown parameter"),
+        ({"nope": 1}, "params.nope", "unknown parameter"),
         (
             {"lifecycle": {"confirm_min_batches": 2.5}},
-            "params.lifecycle.confirm_min_batches: expected an integer",
+            "params.lifecycle.confirm_min_batches",
+            "integer",
         ),
         (
-            {"existence": {"eta_missed": "a lot"}},
-            "params.existence.eta_missed: expected a finite number",
+            {"lifecycle": {"confirm_min_batches": True}},
+            "params.lifecycle.confirm_min_batches",
+            "integer",
         ),
-        ({"proposal": {"extent_percentiles": [5]}}, "expected a list of 2 numbers"),
+        ({"existence": {"eta_missed": "a lot"}}, "params.existence.eta_missed", "number"),
+        ({"existence": {"eta_missed": float("nan")}}, "params.existence.eta_missed", "number"),
+        ({"proposal": {"extent_percentiles": [5]}}, "params.proposal.extent_percentiles[1]", ""),
+        # Ranges: each of these used to be accepted and then broke every later batch.
+        (
+            {"visibility": {"box_samples_per_axis": 100000}},
+            "params.visibility.box_samples_per_axis",
+            "9",
+        ),
+        ({"visibility": {"depth_window_px": -3}}, "params.visibility.depth_window_px", "1"),
+        ({"fixtures": {"voxel_size_m": 0}}, "params.fixtures.voxel_size_m", "0.02"),
+        ({"fixtures": {"taxonomy": ["ta\x00ble"]}}, "params.fixtures.taxonomy[0]", "printable"),
+        # Cross-field rules.
+        (
+            {"existence": {"logodds_min": 5.0, "logodds_max": 1.0}},
+            "params.existence",
+            "logodds_min",
+        ),
+        ({"visibility": {"min_range_m": 7.0}}, "params.visibility", "min_range_m"),
+        ({"visibility": {"depth_window_px": 4}}, "params.visibility", "odd"),
+        ({"fixtures": {"size_limits": {"bench": [1, 1, 1, 0, 0, 0]}}}, "params.fixtures", "bench"),
     ],
 )
-def test_bad_overrides_name_the_field(overrides, message):
-    with pytest.raises(ValueError, match=message.replace(".", r"\.")):
+def test_bad_overrides_name_the_field(overrides, field, reason):
+    with pytest.raises(InvalidParams) as raised:
         Params.from_dict(overrides)
+    assert raised.value.field == field
+    assert raised.value.detail.startswith(f"{field}: ") and reason in raised.value.detail
+
+
+def test_per_class_maps_merge_key_by_key():
+    params = Params.from_dict(
+        {"fixtures": {"size_limits": {"bench": [0.8, 0.3, 0.3, 2.5, 0.8, 0.6]}}}
+    )
+    assert params.fixtures.size_limits["bench"] == (0.8, 0.3, 0.3, 2.5, 0.8, 0.6)
+    assert params.fixtures.size_limits["table"] == Params().fixtures.size_limits["table"]

@@ -29,7 +29,7 @@ step = st.fixed_dictionaries(
 
 def live_run(steps):
     """Decide and fold batch by batch, as the worker does; return the log and the live state."""
-    created = SceneCreated(None, None, None, {"name": "prop", "params": Params().to_dict()})
+    created = SceneCreated(name="prop", params=Params().to_dict())
     state = evolve(SceneState(), created)
     log = [created]
     for i, s in enumerate(steps):

@@ -13,17 +13,19 @@ from fastapi import FastAPI, Request
 from starlette.types import Message
 
 from api_schema import BatchIn
+from core.errors import PbdagError, StateConflict, UnknownTrack, field_path
 from service.codec import decode_batch
 from service.errors import (
+    INTERNAL,
     PROBLEM_MEDIA_TYPE,
-    BodySizeLimit,
-    Conflict,
+    PROBLEMS,
     NotFound,
-    PayloadTooLarge,
-    ProblemError,
-    field_path,
     install_problem_handlers,
+    problem_of,
 )
+from service.middleware.body_limit import BodySizeLimit
+from service.middleware.unexpected import UnexpectedErrors
+from service.store.errors import BatchConflict
 from tests.service.test_codec import batch_body, frame_body
 
 MAX_BODY_BYTES = 200_000
@@ -35,6 +37,7 @@ def make_app() -> tuple[FastAPI, list[str]]:
     app = FastAPI()
     install_problem_handlers(app)
     app.add_middleware(BodySizeLimit, max_bytes=MAX_BODY_BYTES)
+    app.add_middleware(UnexpectedErrors)
     calls: list[str] = []
 
     @app.post("/scenes/{scene_id}/batches")
@@ -48,7 +51,7 @@ def make_app() -> tuple[FastAPI, list[str]]:
 
     @app.post("/conflict")
     def conflict() -> None:
-        raise Conflict("batch 'b1' was already posted with different content", field="batch_id")
+        raise BatchConflict("batch 'b1' was already posted with different content")
 
     @app.get("/boom")
     def boom() -> None:
@@ -100,7 +103,7 @@ def client(app_and_calls: tuple[FastAPI, list[str]]) -> SyncClient:
     return SyncClient(app_and_calls[0])
 
 
-def problem_of(response: httpx.Response, status: int) -> dict[str, Any]:
+def problem_in(response: httpx.Response, status: int) -> dict[str, Any]:
     """Check the status, media type and member set of a problem response; return its body."""
     assert response.status_code == status, response.text
     assert response.headers["content-type"] == PROBLEM_MEDIA_TYPE
@@ -111,30 +114,30 @@ def problem_of(response: httpx.Response, status: int) -> dict[str, Any]:
 
 
 def test_not_found_is_problem_json(client: SyncClient) -> None:
-    problem = problem_of(client.get("/scenes/kitchen"), 404)
+    problem = problem_in(client.get("/scenes/kitchen"), 404)
     assert problem == {
         "type": "/problems/not-found",
         "title": "Not Found",
         "status": 404,
         "detail": "scene 'kitchen' does not exist",
         "field": None,
-        "errors": [],
+        "errors": [{"field": None, "reason": "scene 'kitchen' does not exist"}],
     }
 
 
 def test_conflict_carries_its_field(client: SyncClient) -> None:
-    problem = problem_of(client.post("/conflict"), 409)
-    assert problem["type"] == "/problems/conflict"
+    problem = problem_in(client.post("/conflict"), 409)
+    assert problem["type"] == "/problems/batch-conflict"
     assert problem["field"] == "batch_id"
     assert "different content" in problem["detail"]
 
 
 def test_unknown_route_and_wrong_method_are_problem_json(client: SyncClient) -> None:
-    problem = problem_of(client.get("/no/such/route"), 404)
+    problem = problem_in(client.get("/no/such/route"), 404)
     assert (problem["type"], problem["title"]) == ("about:blank", "Not Found")
 
     response = client.delete("/scenes/kitchen")
-    problem = problem_of(response, 405)
+    problem = problem_in(response, 405)
     assert problem["title"] == "Method Not Allowed"
     assert response.headers["allow"] == "GET"
 
@@ -155,7 +158,7 @@ def test_pydantic_errors_list_every_field_path_without_body_prefix(client: SyncC
 
     response = client.post("/scenes/s1/batches", json=body)
 
-    problem = problem_of(response, 422)
+    problem = problem_in(response, 422)
     assert problem["type"] == "/problems/invalid-request"
     fields = sorted(error["field"] for error in problem["errors"])
     assert fields == ["batch_id", "frames[0].intrinsics.fx", "frames[0].pose"]
@@ -169,7 +172,7 @@ def test_pydantic_errors_list_every_field_path_without_body_prefix(client: SyncC
 def test_nested_pydantic_error_path(client: SyncClient) -> None:
     frame = frame_body()
     frame["detections"][1]["score"] = 2.0
-    problem = problem_of(client.post("/scenes/s1/batches", json=batch_body(frame)), 422)
+    problem = problem_in(client.post("/scenes/s1/batches", json=batch_body(frame)), 422)
     assert problem["field"] == "frames[0].detections[1].score"
     assert problem["errors"] == [
         {
@@ -183,7 +186,7 @@ def test_malformed_json_is_a_422_without_a_field(client: SyncClient) -> None:
     response = client.post(
         "/scenes/s1/batches", content=b'{"batch_id": ', headers={"content-type": "application/json"}
     )
-    problem = problem_of(response, 422)
+    problem = problem_in(response, 422)
     assert problem["field"] is None
     assert "not valid JSON" in problem["errors"][0]["reason"]
 
@@ -191,16 +194,17 @@ def test_malformed_json_is_a_422_without_a_field(client: SyncClient) -> None:
 def test_invalid_observation_names_the_field(client: SyncClient) -> None:
     frame = frame_body()
     frame["detections"][0]["mask"]["size"] = [10, 10]
-    problem = problem_of(client.post("/scenes/s1/batches", json=batch_body(frame)), 422)
+    problem = problem_in(client.post("/scenes/s1/batches", json=batch_body(frame)), 422)
     assert problem["type"] == "/problems/invalid-observation"
     assert problem["field"] == "frames[0].detections[0].mask.size"
     assert problem["errors"][0]["field"] == problem["field"]
     assert "does not match the depth size" in problem["errors"][0]["reason"]
+    assert problem["detail"].startswith("frames[0].detections[0].mask.size: ")
 
 
 def test_unexpected_exception_is_a_500_that_leaks_nothing(client: SyncClient) -> None:
     response = client.get("/boom")
-    problem = problem_of(response, 500)
+    problem = problem_in(response, 500)
     assert problem["title"] == "Internal Server Error"
     for leak in ("secret", "RuntimeError", "Traceback", "/etc/pbdag"):
         assert leak not in response.text
@@ -210,7 +214,7 @@ def test_body_over_the_declared_limit_is_413_before_the_app_reads_it(
     client: SyncClient, app_and_calls: tuple[FastAPI, list[str]]
 ) -> None:
     response = client.post("/raw", content=b"x" * (MAX_BODY_BYTES + 1))
-    problem = problem_of(response, 413)
+    problem = problem_in(response, 413)
     assert problem["type"] == "/problems/payload-too-large"
     assert str(MAX_BODY_BYTES) in problem["detail"]
     assert app_and_calls[1] == []
@@ -230,7 +234,7 @@ def test_streamed_body_over_the_limit_is_413(client: SyncClient, path: str) -> N
 
     response = client.post(path, content=chunks(), headers={"content-type": "application/json"})
     assert "content-length" not in response.request.headers
-    problem_of(response, 413)
+    problem_in(response, 413)
 
 
 def test_streamed_body_stops_being_read_at_the_limit() -> None:
@@ -282,18 +286,13 @@ def test_non_http_scopes_pass_through() -> None:
 @pytest.mark.parametrize(
     ("location", "expected"),
     [
+        (("frames", 0, "detections", 2, "mask", "size"), "frames[0].detections[2].mask.size"),
+        (("batch_id",), "batch_id"),
+        (("frames", 0, "pose", 1, 2), "frames[0].pose[1][2]"),
         (
-            ("body", "frames", 0, "detections", 2, "mask", "size"),
-            "frames[0].detections[2].mask.size",
-        ),
-        (("body", "batch_id"), "batch_id"),
-        (("body", "frames", 0, "pose", 1, 2), "frames[0].pose[1][2]"),
-        (
-            ("body", "frames", 0, "detections", 0, "class_scores", "dining table"),
+            ("frames", 0, "detections", 0, "class_scores", "dining table"),
             'frames[0].detections[0].class_scores["dining table"]',
         ),
-        (("query", "limit"), "query.limit"),
-        (("body",), None),
         ((), None),
     ],
 )
@@ -301,12 +300,27 @@ def test_field_path(location: tuple[str | int, ...], expected: str | None) -> No
     assert field_path(location) == expected
 
 
-def test_problem_error_subclasses_carry_status_and_type() -> None:
-    assert (NotFound("scene", "s1").status, NotFound("scene", "s1").type) == (
-        404,
-        "/problems/not-found",
-    )
-    assert Conflict("x").status == 409
-    too_large = PayloadTooLarge(10)
-    assert (too_large.status, too_large.max_bytes) == (413, 10)
-    assert all(issubclass(cls, ProblemError) for cls in (NotFound, Conflict, PayloadTooLarge))
+def test_query_errors_name_the_parameter(client: SyncClient) -> None:
+    app = FastAPI()
+    install_problem_handlers(app)
+
+    @app.get("/events")
+    def events(limit: int = 10) -> dict[str, int]:
+        return {"limit": limit}
+
+    problem = problem_in(SyncClient(app).get("/events", params={"limit": "many"}), 422)
+    assert problem["field"] == "limit"
+
+
+def test_the_problem_table_is_looked_up_along_the_class_hierarchy() -> None:
+    class MissingMug(NotFound):
+        pass
+
+    class Unregistered(PbdagError):
+        pass
+
+    assert problem_of(MissingMug("mug", "m1")) is PROBLEMS[NotFound]
+    assert problem_of(UnknownTrack("x")).status == 404
+    assert problem_of(StateConflict("x")).status == 409
+    assert problem_of(Unregistered("x")) is INTERNAL
+    assert problem_of(RuntimeError("x")) is INTERNAL

@@ -5,11 +5,12 @@ from __future__ import annotations
 import pytest
 import sqlalchemy as sa
 
-from core.events import TrackAdded, TrackUpdated
-from core.evolve import fold
+from core.events import ObjectAdded, Observation, VisibleMiss
 from core.params import Params
 from core.state import SceneState
-from service.store.engine import make_engine, write_transaction
+from service.commands import create_scene, run_command
+from service.settings import Settings
+from service.store.engine import make_engine
 from service.store.errors import (
     BatchConflict,
     ConcurrencyConflict,
@@ -17,70 +18,72 @@ from service.store.errors import (
     SceneNotFound,
     SeqOutOfRange,
 )
-from service.store.projection import last_seq_by_track, rebuild_scene, write_tracks
+from service.store.projection import rebuild_scene
 from service.store.tables import tracks
 
 
-def added(track_id: str, x: float = 0.0) -> TrackAdded:
+def added(track_id: str, x: float = 0.0) -> ObjectAdded:
     """A minimal add event."""
-    observation = {
-        "frame_id": "f",
-        "label": "mug",
-        "score": 0.9,
-        "center": [x, 0.0, 1.0],
-        "extent": [0.1, 0.1, 0.1],
-        "valid_pixels": 100,
-        "parent": None,
-    }
-    return TrackAdded(
-        track_id,
-        "tentative",
-        "f",
-        {
-            "kind": "object",
-            "observations": [observation],
-            "embedding_sum": None,
-            "embedding_count": 0,
-            "timestamp": 1.0,
-            "existence_logodds": 1.0,
-            "p_exist": 0.73,
-            "batches_observed": 1,
-        },
+    return ObjectAdded(
+        track_id=track_id,
+        state="tentative",
+        frame_id="f",
+        observations=(
+            Observation(
+                frame_id="f",
+                label="mug",
+                score=0.9,
+                center=(x, 0.0, 1.0),
+                extent=(0.1, 0.1, 0.1),
+                valid_pixels=100,
+                parent=None,
+            ),
+        ),
+        embedding_sum=None,
+        embedding_count=0,
+        timestamp=1.0,
+        existence_logodds=1.0,
+        p_exist=0.73,
+        batches_observed=1,
+        parent_evidence={},
     )
 
 
-def missed(track_id: str, logodds: float, misses: int) -> TrackUpdated:
+def missed(track_id: str, logodds: float, misses: int) -> VisibleMiss:
     """A visible-miss update."""
-    return TrackUpdated(
-        track_id,
-        "tentative",
-        "f",
-        {
-            "evidence": "visible_miss",
-            "samples_passed": 9,
-            "samples_total": 27,
-            "existence_logodds": logodds,
-            "p_exist": 0.5,
-            "visible_misses": misses,
-        },
+    return VisibleMiss(
+        track_id=track_id,
+        state="tentative",
+        frame_id="f",
+        samples_passed=9,
+        samples_total=27,
+        existence_logodds=logodds,
+        p_exist=0.5,
+        visible_misses=misses,
     )
+
+
+@pytest.fixture
+def settings(tmp_path):
+    """A snapshot after every append, so that as_of reads exercise snapshot + tail."""
+    return Settings(data_dir=tmp_path / "data", snapshot_interval=1, lease_seconds=30.0)
+
+
+def new_scene(container, name="s", params=None):
+    """A scene through the one write path."""
+    return create_scene(container, name, params or Params())
 
 
 def append_batch(container, scene_id, events, batch_id=None):
-    """Append at the current head and project, as the worker does."""
+    """Append at the current head through the one write path, as the worker does."""
     state = container.log.load_state(scene_id)
-    new_state = fold(state, events)
-    with write_transaction(container.engine) as connection:
-        seqs = container.log.append(connection, scene_id, state.head_seq, events, batch_id)
-        if seqs:
-            write_tracks(connection, scene_id, new_state, last_seq_by_track(seqs[0], events))
-            container.log.save_snapshot(connection, scene_id, new_state)
-    return seqs
+    with container.uow.begin() as work:
+        return work.append(scene_id, state, events, batch_id=batch_id).seqs
 
 
 def test_scene_starts_at_seq_zero_with_its_params_in_the_log(container):
     params = Params.from_dict({"lifecycle": {"move_min_distance_m": 0.5}})
-    scene = container.log.create_scene("kitchen", params)
+    scene = new_scene(container, "kitchen", params)
     assert scene.head_seq == 0
     [created] = container.log.read(scene.id)
     assert (created.seq, created.type) == (0, "scene_created")
@@ -91,29 +94,31 @@ def test_scene_starts_at_seq_zero_with_its_params_in_the_log(container):
 
 
 def test_append_is_gapless_and_conflicts_on_a_stale_head(container):
-    scene = container.log.create_scene("s", Params())
+    scene = new_scene(container)
     assert append_batch(container, scene.id, [added("trk-000001"), added("trk-000002", 1.0)]) == (
         1,
         2,
     )
     assert append_batch(container, scene.id, [missed("trk-000001", 0.3, 1)]) == (3, 3)
-    with pytest.raises(ConcurrencyConflict), write_transaction(container.engine) as connection:
-        container.log.append(connection, scene.id, 1, [missed("trk-000002", 0.3, 1)])
+    stale = container.log.load_state(scene.id, as_of=1)
+    with pytest.raises(ConcurrencyConflict), container.uow.begin() as work:
+        work.append(scene.id, stale, [missed("trk-000002", 0.3, 1)])
     assert container.log.scene(scene.id).head_seq == 3
     assert [e.seq for e in container.log.read(scene.id)] == [0, 1, 2, 3]
 
 
 def test_rollback_leaves_no_gap_and_no_rows(container):
-    scene = container.log.create_scene("s", Params())
-    with pytest.raises(RuntimeError), write_transaction(container.engine) as connection:
-        container.log.append(connection, scene.id, 0, [added("trk-000001")])
+    scene = new_scene(container)
+    state = container.log.load_state(scene.id)
+    with pytest.raises(RuntimeError), container.uow.begin() as work:
+        work.append(scene.id, state, [added("trk-000001")])
         raise RuntimeError("crash before commit")
     assert container.log.scene(scene.id).head_seq == 0
     assert append_batch(container, scene.id, [added("trk-000001")]) == (1, 1)
 
 
 def test_read_filters_and_pages(container):
-    scene = container.log.create_scene("s", Params())
+    scene = new_scene(container)
     append_batch(container, scene.id, [added(f"trk-{i:06d}", float(i)) for i in range(1, 8)])
     page = container.log.read(scene.id, after=2, limit=3)
     assert [e.seq for e in page] == [3, 4, 5]
@@ -122,7 +127,7 @@ def test_read_filters_and_pages(container):
 
 
 def test_as_of_snapshot_plus_tail_equals_replay_and_is_stable(container):
-    scene = container.log.create_scene("s", Params())
+    scene = new_scene(container)
     append_batch(container, scene.id, [added("trk-000001"), added("trk-000002", 2.0)])
     before = container.log.load_state(scene.id, as_of=2).to_dict()
     append_batch(container, scene.id, [missed("trk-000001", 0.3, 1), missed("trk-000002", 0.3, 1)])
@@ -138,7 +143,7 @@ def test_as_of_snapshot_plus_tail_equals_replay_and_is_stable(container):
 
 
 def test_snapshot_in_another_format_is_ignored(container):
-    scene = container.log.create_scene("s", Params())
+    scene = new_scene(container)
     append_batch(container, scene.id, [added("trk-000001")])
     with container.engine.begin() as connection:
         connection.execute(sa.text("UPDATE snapshots SET format_version = 999"))
@@ -146,7 +151,7 @@ def test_snapshot_in_another_format_is_ignored(container):
 
 
 def test_rebuild_reports_no_difference_then_detects_a_tampered_projection(container):
-    scene = container.log.create_scene("s", Params())
+    scene = new_scene(container)
     append_batch(container, scene.id, [added("trk-000001"), added("trk-000002", 2.0)])
     append_batch(container, scene.id, [missed("trk-000001", 0.3, 1)])
     report = rebuild_scene(container.log, scene.id)
@@ -165,7 +170,7 @@ class TestQueue:
         return container.queue.submit(scene_id, batch_id, sha, "blob-" + batch_id, 1)
 
     def test_submit_is_idempotent_and_conflicts_on_new_content(self, container):
-        scene = container.log.create_scene("s", Params())
+        scene = new_scene(container)
         first, created = self.submit(container, scene.id, "b1")
         again, created_again = self.submit(container, scene.id, "b1")
         assert created and not created_again and again.id == first.id
@@ -173,8 +178,8 @@ class TestQueue:
             self.submit(container, scene.id, "b1", sha="b" * 64)
 
     def test_batches_of_one_scene_are_claimed_in_arrival_order_one_at_a_time(self, container):
-        one = container.log.create_scene("one", Params())
-        two = container.log.create_scene("two", Params())
+        one = new_scene(container, "one")
+        two = new_scene(container, "two")
         for batch_id in ("a1", "a2"):
             self.submit(container, one.id, batch_id)
         self.submit(container, two.id, "b1")
@@ -182,27 +187,28 @@ class TestQueue:
         second = container.queue.claim("w2", 30)
         assert (first.batch_id, second.batch_id) == ("a1", "b1")
         assert container.queue.claim("w3", 30) is None  # a2 waits for a1
-        with write_transaction(container.engine) as connection:
-            container.queue.complete(connection, first, None)
+        with container.uow.begin() as work:
+            work.complete(first, None)
         assert container.queue.claim("w3", 30).batch_id == "a2"
 
     def test_completion_is_fenced_by_the_lease(self, container):
-        scene = container.log.create_scene("s", Params())
+        scene = new_scene(container)
         self.submit(container, scene.id, "b1")
         claim = container.queue.claim("w1", 30)
         stolen = type(claim)(
             claim.id, claim.scene_id, claim.batch_id, claim.blob_key, "intruder", 1
         )
-        with pytest.raises(LeaseLost), write_transaction(container.engine) as connection:
-            container.log.append(connection, scene.id, 0, [added("trk-000001")], "b1")
-            container.queue.complete(connection, stolen, (1, 1))
+        state = container.log.load_state(scene.id)
+        with pytest.raises(LeaseLost), container.uow.begin() as work:
+            appended = work.append(scene.id, state, [added("trk-000001")], batch_id="b1")
+            work.complete(stolen, appended.seqs)
         assert container.log.scene(scene.id).head_seq == 0  # the append rolled back with it
         assert container.queue.get(scene.id, "b1").status == "running"
 
     def test_expired_leases_are_requeued_then_parked_dead(self, container):
         now = [1000.0]
         container.queue.clock = lambda: now[0]
-        scene = container.log.create_scene("s", Params())
+        scene = new_scene(container)
         self.submit(container, scene.id, "b1")
         for attempt in (1, 2, 3):
             claim = container.queue.claim(f"w{attempt}", 10)
@@ -214,7 +220,7 @@ class TestQueue:
         assert container.queue.claim("w9", 10) is None
 
     def test_failures_retry_then_go_dead_with_the_error_kept(self, container):
-        scene = container.log.create_scene("s", Params())
+        scene = new_scene(container)
         self.submit(container, scene.id, "b1")
         self.submit(container, scene.id, "b2")
         statuses = []
@@ -228,7 +234,7 @@ class TestQueue:
 
 
 def test_initial_state_is_empty(container):
-    scene = container.log.create_scene("s", Params())
+    scene = new_scene(container)
     state = container.log.load_state(scene.id)
     assert state.head_seq == 0 and state.tracks == {} and isinstance(state, SceneState)
 
@@ -266,9 +272,7 @@ def test_concurrent_migrations_are_serialized(backend, tmp_path, request):
 
 def test_a_command_is_decided_again_when_the_head_moved(container):
     """Verdicts and freezes race with the worker: the expected-head append retries on a new head."""
-    from service.commands import run_command
-
-    scene = container.log.create_scene("s", Params())
+    scene = new_scene(container)
     calls = []
 
     def decide_command(state):
@@ -281,5 +285,5 @@ def test_a_command_is_decided_again_when_the_head_moved(container):
             else [added("trk-000002", 3.0)]
         )
 
-    _state, events, seqs = run_command(container, scene.id, decide_command)
-    assert calls == [0, 1] and seqs == (2, 2) and events[0].type == "update"
+    events, appended = run_command(container, scene.id, decide_command)
+    assert calls == [0, 1] and appended.seqs == (2, 2) and events[0].type == "update"

@@ -1,0 +1,113 @@
+"""The one write path of the log: every append goes through a unit of work.
+
+In one transaction: the expected-head check, the event rows (only finite numbers), every
+projection (track table, baseline packages, snapshot) and, for a worker's batch, the lease
+fence that marks it done. The worker, every command, scene creation and the tests use it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import sqlalchemy as sa
+
+from core.events import BaselineFrozen, BaselineSource, Event
+from core.evolve import evolve, fold
+from core.params import Params
+from core.state import SceneState
+from service.store.engine import write_transaction
+from service.store.event_log import EventLog, SceneRecord, snapshot_due
+from service.store.projection import last_seq_by_track, write_baseline, write_tracks
+from service.store.queue import BatchQueue, Claim
+
+
+@dataclass(frozen=True)
+class Appended:
+    """What an append left behind: the state after the events and their seq range."""
+
+    state: SceneState
+    seqs: tuple[int, int] | None  # None when there was nothing to append
+
+
+class UnitOfWork:
+    """Opens write transactions on the store (`with uow.begin() as work: ...`)."""
+
+    def __init__(
+        self, engine: sa.Engine, log: EventLog, queue: BatchQueue, snapshot_interval: int
+    ) -> None:
+        self.engine = engine
+        self.log = log
+        self.queue = queue
+        self.snapshot_interval = snapshot_interval
+
+    @contextmanager
+    def begin(self) -> Iterator[Writes]:
+        """One write transaction: committed when the block ends, rolled back when it raises."""
+        with write_transaction(self.engine) as connection:
+            yield Writes(self, connection)
+
+
+class Writes:
+    """The writes of one transaction."""
+
+    def __init__(self, unit: UnitOfWork, connection: sa.Connection) -> None:
+        self.unit = unit
+        self.connection = connection
+
+    def create_scene(
+        self,
+        name: str,
+        params: Params,
+        *,
+        baseline: BaselineSource | None = None,
+        scene_id: str | None = None,
+    ) -> tuple[SceneRecord, SceneState]:
+        """A new scene and its event 0; the state after it."""
+        record, created = self.unit.log.insert_scene(
+            self.connection, name, params, scene_id, baseline
+        )
+        return record, fold(SceneState(), [created])
+
+    def append(
+        self,
+        scene_id: str,
+        state: SceneState,
+        events: Sequence[Event],
+        *,
+        batch_id: str | None = None,
+    ) -> Appended:
+        """Append `events` decided on `state` (its head is the expected head) and project them.
+
+        ConcurrencyConflict when the head moved; NonFiniteEvent when an event holds NaN or
+        infinity. Either way the transaction rolls back and nothing is stored.
+        """
+        seqs = self.unit.log.append(self.connection, scene_id, state.head_seq, events, batch_id)
+        after = fold(state, events)
+        if seqs is not None:
+            self._project(scene_id, state, events, after, seqs[0])
+        return Appended(after, seqs)
+
+    def complete(self, claim: Claim, seqs: tuple[int, int] | None) -> None:
+        """Mark the claimed batch done; LeaseLost (the whole transaction rolls back) if not ours."""
+        self.unit.queue.complete(self.connection, claim, seqs)
+
+    def _project(
+        self,
+        scene_id: str,
+        before: SceneState,
+        events: Sequence[Event],
+        after: SceneState,
+        first_seq: int,
+    ) -> None:
+        """Every projection of an append: tracks, baseline packages, snapshot."""
+        write_tracks(self.connection, scene_id, after, last_seq_by_track(first_seq, events))
+        if any(isinstance(event, BaselineFrozen) for event in events):
+            state = before
+            for offset, event in enumerate(events):
+                if isinstance(event, BaselineFrozen):
+                    write_baseline(self.connection, scene_id, state, event, first_seq + offset)
+                state = evolve(state, event)
+        if snapshot_due(before.head_seq, after.head_seq, self.unit.snapshot_interval):
+            self.unit.log.save_snapshot(self.connection, scene_id, after)
