@@ -20,6 +20,7 @@ from service.routes import (
     tracks,
     verifications,
 )
+from service.security import install_security
 from service.states import StateReader
 from service.worker import WorkerThread
 
@@ -55,6 +56,7 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.state.states = StateReader(container.log)
     install_problem_handlers(app)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
+    install_security(app, container)  # hosts, CORS, tokens, rate limits: before the body limit
     for module in (scenes, batches, graph, events, tracks, verifications, baselines, inspections):
         app.include_router(module.router)
 
