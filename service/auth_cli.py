@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     import sqlalchemy as sa
 
-__all__ = ["register", "serve_refusal"]
+__all__ = ["access_summary", "register", "serve_refusal"]
 
 
 def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -120,3 +120,18 @@ def serve_refusal(host: str, engine: sa.Engine) -> str | None:
         "    Authorization: Bearer <token>\n"
         "Or serve on this machine only: pbdag serve --host 127.0.0.1"
     )
+
+
+def access_summary(engine: sa.Engine, allow_anonymous_local: bool) -> str:
+    """One line for `pbdag serve`: who will be able to use the API, and how to change it."""
+    from service.auth import list_tokens
+
+    active = sum(record.active for record in list_tokens(engine))
+    anonymous = "on" if allow_anonymous_local else "off"
+    line = f"pbdag: {active} active API token(s); anonymous local access {anonymous}"
+    if active == 0 and not allow_anonymous_local:
+        line += (
+            ": every request but /healthz will get a 401. Create a token "
+            "(pbdag token create --name NAME --scope write) or set PBDAG_ALLOW_ANONYMOUS_LOCAL=true"
+        )
+    return line

@@ -73,7 +73,7 @@ def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from service.app import create_app
-    from service.auth_cli import serve_refusal
+    from service.auth_cli import access_summary, serve_refusal
     from service.bootstrap import build_container
     from service.security import hosts_when_serving
 
@@ -89,6 +89,7 @@ def _serve(args: argparse.Namespace) -> int:
     )
     print(f"pbdag: API on http://{args.host}:{args.port} (docs at /docs)", flush=True)
     print(f"pbdag: allowed Host names {', '.join(settings.allowed_hosts)} (PBDAG_ALLOWED_HOSTS)")
+    print(access_summary(container.engine, settings.allow_anonymous_local), flush=True)
     app = create_app(container, run_worker=not args.no_worker)
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
     return 0

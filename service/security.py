@@ -34,7 +34,7 @@ from service.auth import (
     scope_for_method,
 )
 from service.bootstrap import Container
-from service.errors import PROBLEM_MEDIA_TYPE, ProblemError, problem_body
+from service.errors import PROBLEM_MEDIA_TYPE, FieldError, ProblemError, problem_body
 from service.ratelimit import RateLimiter
 
 __all__ = [
@@ -58,11 +58,11 @@ class HostNotAllowed(ProblemError):
     type = "/problems/host-not-allowed"
 
     def __init__(self, host: str) -> None:
-        super().__init__(
+        detail = (
             f"the Host header {host!r} is not one this service answers for; "
-            "an operator adds the names clients use to PBDAG_ALLOWED_HOSTS",
-            field="host",
+            "an operator adds the names clients use to PBDAG_ALLOWED_HOSTS"
         )
+        super().__init__(detail, field="host", errors=[FieldError("host", detail)])
 
 
 def _response_headers(problem: ProblemError) -> list[tuple[bytes, bytes]]:

@@ -241,6 +241,7 @@ def test_a_foreign_host_header_is_rejected_before_anything_else(container):
         response = client.get("/healthz")
         body = problem(response, 400)
         assert body["field"] == "host" and "attacker.example" in body["detail"]
+        assert body["errors"] == [{"field": "host", "reason": body["detail"]}]
         problem(client.post("/v1/scenes", json={"name": "x"}), 400)
     for base_url in ("http://localhost:8000", "http://127.0.0.1:8000", "http://[::1]:8000"):
         with local_client(app, base_url=base_url) as client:

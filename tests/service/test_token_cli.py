@@ -14,7 +14,7 @@ import pytest
 import sqlalchemy as sa
 
 from service.auth import create_token, revoke_token, verify_token
-from service.auth_cli import serve_refusal
+from service.auth_cli import access_summary, serve_refusal
 from service.bootstrap import build_container
 from service.cli import main
 from service.settings import Settings
@@ -116,3 +116,12 @@ def test_serve_refusal_decides_by_loopback_and_active_tokens(tmp_path):
     assert serve_refusal("0.0.0.0", engine) is None
     revoke_token(engine, new.record.id)
     assert serve_refusal("0.0.0.0", engine) is not None  # only active tokens count
+
+
+def test_serve_says_when_nobody_could_use_the_api(tmp_path):
+    engine = build_container(Settings(data_dir=tmp_path)).engine
+    assert "every request but /healthz will get a 401" in access_summary(engine, False)
+    assert "401" not in access_summary(engine, True)
+    create_token(engine, "robot-1", ["read"])
+    summary = access_summary(engine, False)
+    assert "1 active API token(s)" in summary and "401" not in summary
