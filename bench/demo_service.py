@@ -19,6 +19,7 @@ import uvicorn
 
 from bench.robot import run_robot
 from service.app import create_app
+from service.bootstrap import build_container
 from service.settings import Settings
 
 
@@ -111,12 +112,16 @@ def main(argv: list[str] | None = None) -> None:
     )
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
-    settings = Settings()
+    # The demo's robot and your browser talk to its own server over loopback: no token needed.
+    settings = Settings(allow_anonymous_local=True)
     port = free_port(args.port)
     base_url = f"http://127.0.0.1:{port}"
     server = uvicorn.Server(
         uvicorn.Config(
-            create_app(run_worker=True), host="127.0.0.1", port=port, log_level="warning"
+            create_app(build_container(settings), run_worker=True),
+            host="127.0.0.1",
+            port=port,
+            log_level="warning",
         )
     )
     thread = threading.Thread(target=server.run, name="pbdag-api", daemon=True)

@@ -43,6 +43,9 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
         parser.add_argument(
             "--via-service", metavar="URL", help="run PBD-AG through this service's HTTP API"
         )
+        parser.add_argument(
+            "--token", help="bearer token for --via-service (default: $PBDAG_TOKEN)"
+        )
         parser.add_argument("--quiet", action="store_true", help="no progress bar")
         parser.set_defaults(handler=run)
 
@@ -50,6 +53,8 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
 def run(args: argparse.Namespace) -> int:
     """Run a protocol and write its report."""
     # Imported here so that `pbdag serve` never loads the simulator (open3d) just to build its CLI.
+    import os
+
     import httpx
 
     from bench.methods import DYNAMIC_METHODS, FIXTURE_METHODS, method_named
@@ -64,8 +69,13 @@ def run(args: argparse.Namespace) -> int:
         if args.methods
         else list(catalogue)
     )
+    token = args.token or os.environ.get("PBDAG_TOKEN")
     client = (
-        httpx.Client(base_url=args.via_service.rstrip("/"), timeout=60.0)
+        httpx.Client(
+            base_url=args.via_service.rstrip("/"),
+            timeout=60.0,
+            headers={"Authorization": f"Bearer {token}"} if token else {},
+        )
         if args.via_service
         else None
     )

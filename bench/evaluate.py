@@ -201,7 +201,11 @@ def _wait_done(
 ) -> dict[str, Any]:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        status: dict[str, Any] = client.get(f"/v1/scenes/{scene_id}/batches/{batch_id}").json()
+        response = client.get(f"/v1/scenes/{scene_id}/batches/{batch_id}")
+        if response.status_code == 429:  # polling faster than the service's rate limit
+            time.sleep(float(response.headers.get("retry-after", "1")))
+            continue
+        status: dict[str, Any] = response.json()
         if status["status"] == "done":
             return status
         if status["status"] == "dead":

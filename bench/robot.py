@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -163,15 +164,23 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--pace", type=float, default=0.0, help="seconds to wait between batches")
     parser.add_argument("--name", default="sim-demo", help="scene name")
-    args = parser.parse_args(argv)
-    scene_id = run_robot(
-        args.url,
-        scene_name=args.name,
-        frames=args.frames,
-        frames_per_batch=args.frames_per_batch,
-        seed=args.seed,
-        pace_seconds=args.pace,
+    parser.add_argument(
+        "--token",
+        default=os.environ.get("PBDAG_TOKEN"),
+        help="bearer token with the write scope (default: $PBDAG_TOKEN)",
     )
+    args = parser.parse_args(argv)
+    headers = {"Authorization": f"Bearer {args.token}"} if args.token else {}
+    with httpx.Client(timeout=30.0, headers=headers) as client:
+        scene_id = run_robot(
+            args.url,
+            scene_name=args.name,
+            frames=args.frames,
+            frames_per_batch=args.frames_per_batch,
+            seed=args.seed,
+            pace_seconds=args.pace,
+            client=client,
+        )
     print(scene_id)
 
 

@@ -22,6 +22,7 @@ from service.routes import (
     tracks,
     verifications,
 )
+from service.security import install_security
 from service.states import StateReader
 from service.worker import WorkerThread
 
@@ -57,6 +58,7 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.state.states = StateReader(container.log)
     install_problem_handlers(app)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
+    install_security(app, container)  # hosts, CORS, tokens, rate limits: before the body limit
     app.add_middleware(UnexpectedErrors)  # outermost of ours: a 500 keeps the connection
     for module in (scenes, batches, graph, events, tracks, verifications, baselines, inspections):
         app.include_router(module.router)

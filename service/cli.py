@@ -11,6 +11,7 @@ import threading
 from importlib.metadata import entry_points
 from pathlib import Path
 
+from service.auth_cli import register as register_token_commands
 from service.settings import Settings
 
 OPENAPI_PATH = Path(__file__).resolve().parents[1] / "api_schema" / "openapi.json"
@@ -44,6 +45,7 @@ def main(argv: list[str] | None = None) -> int:
 
     openapi = commands.add_parser("openapi", help="write the OpenAPI document")
     openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
+    register_token_commands(commands)  # `pbdag token create|list|revoke`
 
     for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from bench
         try:
@@ -71,13 +73,24 @@ def _serve(args: argparse.Namespace) -> int:
     import uvicorn
 
     from service.app import create_app
+    from service.auth_cli import access_summary, serve_refusal
+    from service.bootstrap import build_container
+    from service.security import hosts_when_serving
 
     settings = Settings()
+    settings.allowed_hosts = hosts_when_serving(settings.allowed_hosts, args.host)
+    container = build_container(settings)
+    refusal = serve_refusal(args.host, container.engine)  # before binding anything
+    if refusal is not None:
+        print(refusal, file=sys.stderr)
+        return 2
     print(
         f"pbdag: database {_redacted(settings.resolved_database_url())}, data in {settings.data_dir.resolve()}"
     )
     print(f"pbdag: API on http://{args.host}:{args.port} (docs at /docs)", flush=True)
-    app = create_app(run_worker=not args.no_worker)
+    print(f"pbdag: allowed Host names {', '.join(settings.allowed_hosts)} (PBDAG_ALLOWED_HOSTS)")
+    print(access_summary(container.engine, settings.allow_anonymous_local), flush=True)
+    app = create_app(container, run_worker=not args.no_worker)
     uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
     return 0
 

@@ -18,6 +18,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import Response
+from starlette.types import Send
 
 from core.errors import (
     InvalidCommand,
@@ -27,6 +28,7 @@ from core.errors import (
     UnknownTrack,
     field_path,
 )
+from service.access_errors import Forbidden, HostNotAllowed, RateLimited, Unauthorized
 from service.codec import InvalidObservation
 from service.store.errors import (
     BatchConflict,
@@ -66,6 +68,9 @@ INTERNAL = Problem(500, "Internal Server Error", "/problems/internal-error")
 
 # The one table. More specific classes win over their bases.
 PROBLEMS: dict[type[Exception], Problem] = {
+    HostNotAllowed: Problem(400, "Host not allowed", "/problems/host-not-allowed"),
+    Unauthorized: Problem(401, "Unauthorized", "/problems/unauthorized"),
+    Forbidden: Problem(403, "Forbidden", "/problems/insufficient-scope"),
     NotFound: Problem(404, "Not Found", "/problems/not-found"),
     SceneNotFound: Problem(404, "Not Found", "/problems/not-found"),
     UnknownTrack: Problem(404, "Not Found", "/problems/unknown-track"),
@@ -77,6 +82,7 @@ PROBLEMS: dict[type[Exception], Problem] = {
     InvalidCommand: Problem(422, "Invalid command", "/problems/invalid-command"),
     InvalidParams: Problem(422, "Invalid parameters", "/problems/invalid-params"),
     InvalidObservation: Problem(422, "Invalid observation", "/problems/invalid-observation"),
+    RateLimited: Problem(429, "Too Many Requests", "/problems/rate-limited"),
     StoreError: INTERNAL,
 }
 
@@ -119,13 +125,38 @@ def problem_response(
     return Response(body, problem.status, headers=headers, media_type=PROBLEM_MEDIA_TYPE)
 
 
+def reported(error: PbdagError) -> tuple[Problem, str, str | None]:
+    """The problem, detail and field a client sees for `error` (nothing internal for a 500)."""
+    problem = problem_of(error)
+    if problem is INTERNAL:  # a store failure no client caused: say nothing of internals
+        return INTERNAL, "the server failed to process the request", None
+    return problem, error.detail, error.field
+
+
+async def send_problem(send: Send, error: PbdagError) -> None:
+    """Answer with a problem+json document straight on the ASGI channel (from middleware)."""
+    problem, detail, field = reported(error)
+    body = problem_body(problem, detail, field, [(field, detail)])
+    extra = [(name.lower().encode(), value.encode()) for name, value in error.headers.items()]
+    await send(
+        {
+            "type": "http.response.start",
+            "status": problem.status,
+            "headers": [
+                (b"content-type", PROBLEM_MEDIA_TYPE.encode()),
+                (b"content-length", str(len(body)).encode()),
+                *extra,
+            ],
+        }
+    )
+    await send({"type": "http.response.body", "body": body})
+
+
 async def _handle_reported(request: Request, exc: Exception) -> Response:
     """Every PbdagError: its table entry, its detail and field, and its headers."""
     assert isinstance(exc, PbdagError)
-    problem = problem_of(exc)
-    if problem is INTERNAL:  # a store failure no client caused: say nothing of internals
-        return problem_response(INTERNAL, "the server failed to process the request")
-    return problem_response(problem, exc.detail, exc.field, headers=exc.headers or None)
+    problem, detail, field = reported(exc)
+    return problem_response(problem, detail, field, headers=exc.headers or None)
 
 
 INVALID_REQUEST = Problem(422, "Invalid request", "/problems/invalid-request")

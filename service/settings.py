@@ -5,11 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic_settings import SettingsConfigDict
+
+from service.security_settings import SecuritySettings, with_database_password
 
 
-class Settings(BaseSettings):
-    """Service settings (environment prefix PBDAG_)."""
+class Settings(SecuritySettings):
+    """Service settings (environment prefix PBDAG_; security ones in service/security_settings.py)."""
 
     model_config = SettingsConfigDict(env_prefix="PBDAG_", extra="ignore")
 
@@ -40,5 +42,5 @@ class Settings(BaseSettings):
     def resolved_database_url(self) -> str:
         """The database URL, defaulting to the SQLite file under the data directory."""
         if self.database_url:
-            return self.database_url
+            return with_database_password(self.database_url, self.database_password)
         return f"sqlite:///{(self.data_dir / 'pbdag.db').resolve()}"

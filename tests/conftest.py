@@ -71,9 +71,14 @@ def backend(request: pytest.FixtureRequest) -> str:
 
 @pytest.fixture
 def settings(tmp_path: Path) -> Settings:
-    """Settings with a small snapshot interval so snapshots are exercised."""
+    """Settings with a small snapshot interval so snapshots are exercised; loopback clients
+    (tests.clients.local_client) need no token."""
     return Settings(
-        data_dir=tmp_path / "data", snapshot_interval=25, lease_seconds=30.0, max_attempts=3
+        data_dir=tmp_path / "data",
+        snapshot_interval=25,
+        lease_seconds=30.0,
+        max_attempts=3,
+        allow_anonymous_local=True,
     )
 
 

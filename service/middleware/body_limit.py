@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.errors import PROBLEM_MEDIA_TYPE, PROBLEMS, PayloadTooLarge, problem_body
+from service.errors import PayloadTooLarge, send_problem
 
 
 class BodySizeLimit:
@@ -69,17 +69,4 @@ class BodySizeLimit:
 
     async def _send_too_large(self, send: Send) -> None:
         """Answer 413 straight on the ASGI channel (no Request object exists here)."""
-        error = PayloadTooLarge(self.max_bytes)
-        problem = PROBLEMS[PayloadTooLarge]
-        body = problem_body(problem, error.detail, error.field, [(error.field, error.detail)])
-        await send(
-            {
-                "type": "http.response.start",
-                "status": problem.status,
-                "headers": [
-                    (b"content-type", PROBLEM_MEDIA_TYPE.encode()),
-                    (b"content-length", str(len(body)).encode()),
-                ],
-            }
-        )
-        await send({"type": "http.response.body", "body": body})
+        await send_problem(send, PayloadTooLarge(self.max_bytes))

@@ -11,7 +11,8 @@ import logging
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.errors import INTERNAL, PROBLEM_MEDIA_TYPE, problem_body
+from core.errors import PbdagError
+from service.errors import send_problem
 
 logger = logging.getLogger("pbdag.api")
 
@@ -41,15 +42,4 @@ class UnexpectedErrors:
             logger.exception("unexpected error on %s %s", scope.get("method"), scope.get("path"))
             if started:
                 raise  # the response is half sent: only closing the connection is honest
-            body = problem_body(INTERNAL, "the server failed to process the request", None, [])
-            await send(
-                {
-                    "type": "http.response.start",
-                    "status": 500,
-                    "headers": [
-                        (b"content-type", PROBLEM_MEDIA_TYPE.encode()),
-                        (b"content-length", str(len(body)).encode()),
-                    ],
-                }
-            )
-            await send({"type": "http.response.body", "body": body})
+            await send_problem(send, PbdagError("unexpected"))  # unregistered: a bare 500

@@ -104,4 +104,17 @@ baselines = sa.Table(
     sa.Column("body", sa.LargeBinary, nullable=False),
 )
 
+# API bearer tokens (service/auth.py): only the sha256 of a token is kept, never the token.
+api_tokens = sa.Table(
+    "api_tokens",
+    metadata,
+    sa.Column("id", sa.String(32), primary_key=True),  # public, the `<id>` of pbdag_<id>_<secret>
+    sa.Column("name", sa.String(200), nullable=False),
+    sa.Column("scopes", sa.String(64), nullable=False),  # space-separated: read write admin
+    sa.Column("token_sha256", sa.String(64), nullable=False),
+    sa.Column("created_at", sa.Float, nullable=False),  # unix seconds
+    sa.Column("revoked_at", sa.Float),
+    sa.UniqueConstraint("token_sha256", name="uq_api_tokens_token_sha256"),
+)
+
 PROJECTION_TABLES = (tracks, snapshots, baselines)

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fastapi.testclient import TestClient
-
 from bench.evaluate import run_in_process, run_via_service
 from bench.methods import DYNAMIC_METHODS, method_named
 from bench.protocols import FRAMES_PER_BATCH, acquired_truth
@@ -14,6 +12,7 @@ from bench.stream import simulate, wire_batches
 from service.app import create_app
 from service.bootstrap import build_container
 from service.settings import Settings
+from tests.clients import local_client
 
 HOTEL = Path(__file__).resolve().parents[2] / "bench" / "scenarios" / "hotel-suite.yaml"
 
@@ -27,8 +26,8 @@ def test_in_process_and_via_service_give_the_same_events_and_graphs(tmp_path):
     _run, batches = short_stream()
     pbdag = method_named("PBD-AG")
     local = run_in_process(pbdag, batches)
-    container = build_container(Settings(data_dir=tmp_path))
-    with TestClient(create_app(container, run_worker=True)) as client:
+    container = build_container(Settings(data_dir=tmp_path, allow_anonymous_local=True))
+    with local_client(create_app(container, run_worker=True)) as client:
         remote = run_via_service(pbdag, batches, client)
     key = [(e.frame, e.type, e.track_id, dict(e.details)) for e in local.events]
     assert key and key == [(e.frame, e.type, e.track_id, dict(e.details)) for e in remote.events]

@@ -13,12 +13,12 @@ from pathlib import Path
 
 import httpx
 import pytest
-from fastapi.testclient import TestClient
 
 from service.app import create_app
 from service.bootstrap import build_container
 from service.settings import Settings
 from service.worker import Worker
+from tests.clients import local_client
 from tests.conftest import store_backends
 from tests.e2e.simworld import WORLD, batch
 
@@ -78,8 +78,10 @@ def outcome(client, scene_id):
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     """The uninterrupted run, in process."""
-    container = build_container(Settings(data_dir=tmp_path_factory.mktemp("reference")))
-    with TestClient(create_app(container)) as client:
+    container = build_container(
+        Settings(data_dir=tmp_path_factory.mktemp("reference"), allow_anonymous_local=True)
+    )
+    with local_client(create_app(container)) as client:
         scene_id = client.post("/v1/scenes", json={"name": "crash"}).json()["id"]
         for body in stream():
             assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code == 202
@@ -126,7 +128,13 @@ def run_with_kill(url: str, start_all, log: Path) -> tuple:
 def test_sigkill_right_after_accepting_recovers_exactly_once(reference, tmp_path, backend, request):
     """SQLite: `pbdag serve` with its worker. PostgreSQL: `serve --no-worker` and two `pbdag worker`."""
     port = free_port()
-    env = {**os.environ, "PBDAG_DATA_DIR": str(tmp_path / "data"), "PBDAG_LEASE_SECONDS": "2"}
+    env = {
+        **os.environ,
+        "PBDAG_DATA_DIR": str(tmp_path / "data"),
+        "PBDAG_LEASE_SECONDS": "2",
+        "PBDAG_ALLOW_ANONYMOUS_LOCAL": "true",  # this test's client is on 127.0.0.1
+        "PBDAG_RATE_LIMIT_PER_MINUTE": "0",  # it polls 20 batch statuses five times a second
+    }
     env.pop("PBDAG_DATABASE_URL", None)
     if backend == "sqlite":
         commands = [["serve", "--port", str(port)]]

@@ -5,11 +5,11 @@ from __future__ import annotations
 import math
 
 import pytest
-from fastapi.testclient import TestClient
 
 from service.app import create_app
 from service.store.projection import rebuild_scene
 from service.worker import Worker
+from tests.clients import local_client
 from tests.e2e.fixture_world import (
     AWAY_VIEW,
     CLOSE_VIEW,
@@ -27,7 +27,7 @@ from tests.e2e.fixture_world import (
 
 @pytest.fixture
 def api(container):
-    with TestClient(create_app(container)) as client:
+    with local_client(create_app(container)) as client:
         yield client, Worker(container), container
 
 

@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
 from service.app import create_app
 from service.worker import Worker
+from tests.clients import local_client
 from tests.e2e.simworld import MUG_CENTER, OCCLUDER, WORLD, batch
 
 
 @pytest.fixture
 def api(container):
     """An HTTP client on the app, and a worker the test drives itself."""
-    with TestClient(create_app(container)) as client:
+    with local_client(create_app(container)) as client:
         yield client, Worker(container)
 
 

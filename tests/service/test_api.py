@@ -7,17 +7,17 @@ import copy
 import json
 
 import pytest
-from fastapi.testclient import TestClient
 
 from service.app import create_app
 from service.cli import OPENAPI_PATH
 from service.worker import Worker
+from tests.clients import local_client
 from tests.e2e.simworld import WORLD, batch
 
 
 @pytest.fixture
 def client(container):
-    with TestClient(create_app(container)) as test_client:
+    with local_client(create_app(container)) as test_client:
         yield test_client
 
 
@@ -94,7 +94,7 @@ def test_unknown_scene_is_404_and_oversized_body_413(container, client, good_bat
     response = client.post("/v1/scenes/scn-missing/batches", json=good_batch)
     assert response.status_code == 404 and response.json()["field"] == "scene_id"
     container.settings.max_body_bytes = 1000
-    with TestClient(create_app(container)) as small:
+    with local_client(create_app(container)) as small:
         scene = small.post("/v1/scenes", json={"name": "x"}).json()["id"]
         response = small.post(f"/v1/scenes/{scene}/batches", content=json.dumps(good_batch))
         assert response.status_code == 413

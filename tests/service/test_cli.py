@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import sqlalchemy as sa
-from fastapi.testclient import TestClient
 
 from service.app import create_app
 from service.bootstrap import build_container
 from service.cli import main
 from service.settings import Settings
 from service.store.tables import tracks
+from tests.clients import local_client
 from tests.e2e.simworld import WORLD, batch
 
 
@@ -18,8 +18,8 @@ def test_worker_drain_then_rebuild_reports_no_difference_then_a_tampered_row(
 ):
     monkeypatch.setenv("PBDAG_DATA_DIR", str(tmp_path))
     monkeypatch.delenv("PBDAG_DATABASE_URL", raising=False)
-    container = build_container(Settings(snapshot_interval=5))
-    with TestClient(create_app(container)) as client:
+    container = build_container(Settings(snapshot_interval=5, allow_anonymous_local=True))
+    with local_client(create_app(container)) as client:
         scene_id = client.post("/v1/scenes", json={"name": "cli"}).json()["id"]
         for i in range(6):
             world = WORLD if i < 3 else WORLD.without("mug")

@@ -264,7 +264,7 @@ def test_concurrent_migrations_are_serialized(backend, tmp_path, request):
         with engine.connect() as connection:
             assert (
                 connection.exec_driver_sql("select version_num from alembic_version").scalar()
-                == "0002"
+                == "0003"
             )
     finally:
         engine.dispose()

@@ -1,0 +1,56 @@
+"""The errors of the LAN boundary: unknown Host, missing or bad token, missing scope, rate limit.
+
+Each carries the response headers HTTP asks for (WWW-Authenticate, Retry-After); their statuses
+are in the one problem table (service/errors.py).
+"""
+
+from __future__ import annotations
+
+from core.errors import PbdagError
+
+AUTH_FIELD = "authorization"  # the request header a token problem is about
+REALM = 'realm="pbdag"'
+
+
+class AccessProblem(PbdagError):
+    """Base of the access errors."""
+
+
+class HostNotAllowed(AccessProblem):
+    """The Host header names a host the service does not answer for (DNS rebinding)."""
+
+    def __init__(self, host: str) -> None:
+        super().__init__(
+            f"the Host header {host!r} is not one this service answers for; "
+            "an operator adds the names clients use to PBDAG_ALLOWED_HOSTS",
+            "host",
+        )
+
+
+class Unauthorized(AccessProblem):
+    """No token, or one that is malformed, unknown or revoked (RFC 6750 section 3)."""
+
+    def __init__(self, detail: str, *, error: str | None = None) -> None:
+        challenge = f"Bearer {REALM}" + (f', error="{error}"' if error else "")
+        super().__init__(detail, AUTH_FIELD, {"WWW-Authenticate": challenge})
+
+
+class Forbidden(AccessProblem):
+    """A valid client without the scope the request needs."""
+
+    def __init__(self, detail: str, *, needed: str) -> None:
+        challenge = f'Bearer {REALM}, error="insufficient_scope", scope="{needed}"'
+        super().__init__(detail, AUTH_FIELD, {"WWW-Authenticate": challenge})
+        self.needed = needed
+
+
+class RateLimited(AccessProblem):
+    """Too many requests from one token (or one address): retry after `retry_after` seconds."""
+
+    def __init__(self, retry_after: int, *, per_minute: int, field: str | None) -> None:
+        super().__init__(
+            f"rate limit of {per_minute} requests per minute exceeded; retry in {retry_after} s",
+            field,
+            {"Retry-After": str(retry_after)},
+        )
+        self.retry_after = retry_after

@@ -1,0 +1,242 @@
+"""The LAN boundary of the app: allowed Host names, CORS, bearer tokens with scopes, rate limits.
+
+Order of the layers, outermost first (`install_security` adds them):
+
+    AllowedHosts (DNS rebinding) -> CORS (optional) -> AccessControl -> body limit -> routes
+
+AccessControl authenticates before anything reads the request body, so a client without a
+valid token can make the service read neither a 64 MiB batch nor a line of JSON.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from fastapi import FastAPI
+from starlette.concurrency import run_in_threadpool
+from starlette.datastructures import Headers
+from starlette.middleware.cors import CORSMiddleware
+from starlette.types import ASGIApp, Receive, Scope, Send
+
+from service.access_errors import (
+    AUTH_FIELD,
+    AccessProblem,
+    Forbidden,
+    HostNotAllowed,
+    RateLimited,
+    Unauthorized,
+)
+from service.auth import (
+    Principal,
+    address_key,
+    authenticate,
+    authorize,
+    scope_for_method,
+)
+from service.bootstrap import Container
+from service.errors import send_problem
+from service.ratelimit import RateLimiter
+
+__all__ = [
+    "OPEN_PATHS",
+    "AccessControl",
+    "AllowedHosts",
+    "install_security",
+]
+
+# Liveness probes must not need a token (they carry none).
+OPEN_PATHS = frozenset({"/healthz"})
+BEARER_SCHEME = "bearer"
+
+
+# --- Host names -------------------------------------------------------------------------------
+
+
+def _host_name(host_header: str) -> str:
+    """The name in a Host header, without port or IPv6 brackets, lower case."""
+    host = host_header.strip().lower()
+    if host.startswith("["):  # [::1]:8000
+        return host[1 : host.find("]")] if "]" in host else host
+    if host.count(":") == 1:  # name:port (a bare IPv6 address has several colons)
+        host = host.split(":", 1)[0]
+    return host.rstrip(".")
+
+
+class AllowedHosts:
+    """Pure ASGI middleware: 400 problem+json unless the Host header names an allowed host."""
+
+    def __init__(self, app: ASGIApp, allowed: Sequence[str]) -> None:
+        self.app = app
+        patterns = {_host_name(name) for name in allowed if name.strip()}
+        self.any_host = "*" in patterns
+        self.suffixes = tuple(p[1:] for p in patterns if p.startswith("*."))  # ".example.org"
+        self.names = frozenset(p for p in patterns if not p.startswith("*"))
+
+    def allows(self, host_header: str) -> bool:
+        """True when the header's host is listed, or matches a `*.domain` pattern."""
+        if self.any_host:
+            return True
+        name = _host_name(host_header)
+        return bool(name) and (name in self.names or name.endswith(self.suffixes))
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Check every HTTP request (and refuse websockets from foreign hosts)."""
+        if scope["type"] not in ("http", "websocket"):
+            await self.app(scope, receive, send)
+            return
+        host = Headers(scope=scope).get("host", "")
+        if self.allows(host):
+            await self.app(scope, receive, send)
+        elif scope["type"] == "http":
+            await send_problem(send, HostNotAllowed(host))
+        else:
+            await send({"type": "websocket.close", "code": 1008})
+
+
+def hosts_when_serving(allowed: Sequence[str], bind_host: str) -> list[str]:
+    """The allowed hosts plus the address the server binds (not a wildcard, which no client names)."""
+    if _host_name(bind_host) in ("0.0.0.0", "::", "") or bind_host in allowed:
+        return list(allowed)
+    return [*allowed, bind_host]
+
+
+# --- tokens, scopes, rate limits ---------------------------------------------------------------
+
+
+class AccessControl:
+    """Pure ASGI middleware: authenticate, rate-limit and check the method's scope.
+
+    GET/HEAD/OPTIONS need `read`, other methods `write`; OPEN_PATHS need nothing. The principal
+    is left in `request.state.principal` for routes that need more (RequireAdmin).
+    """
+
+    def __init__(
+        self,
+        app: ASGIApp,
+        *,
+        container: Container,
+        limiter: RateLimiter | None,
+    ) -> None:
+        self.app = app
+        self.engine = container.engine
+        self.allow_anonymous_local = container.settings.allow_anonymous_local
+        self.limiter = limiter
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        """Answer 401, 403 or 429 here, before the app reads anything of the request."""
+        if scope["type"] != "http" or _route_path(scope) in OPEN_PATHS:
+            await self.app(scope, receive, send)
+            return
+        try:
+            principal = await self._principal(scope)
+            self._charge(principal.rate_key, AUTH_FIELD if principal.kind == "token" else None)
+            authorize(principal, scope_for_method(scope["method"]))
+        except Unauthorized as unauthorized:
+            answer: AccessProblem = unauthorized
+            # Failed attempts are charged to the address, so a flood of guesses is throttled too.
+            try:
+                self._charge(address_key(_client_host(scope)), None)
+            except RateLimited as limited:
+                answer = limited
+            await send_problem(send, answer)
+            return
+        except (Forbidden, RateLimited) as problem:
+            await send_problem(send, problem)
+            return
+        scope.setdefault("state", {})["principal"] = principal
+        await self.app(scope, receive, send)
+
+    async def _principal(self, scope: Scope) -> Principal:
+        values = Headers(scope=scope).getlist("authorization")
+        if len(values) > 1:
+            raise Unauthorized("send one Authorization header", error="invalid_request")
+        authorization = values[0] if values else None
+        client_host = _client_host(scope)
+        if authorization is None:  # no database involved: stay on the event loop
+            return authenticate(
+                None,
+                client_host,
+                engine=self.engine,
+                allow_anonymous_local=self.allow_anonymous_local,
+            )
+        return await run_in_threadpool(
+            authenticate,
+            authorization,
+            client_host,
+            engine=self.engine,
+            allow_anonymous_local=self.allow_anonymous_local,
+        )
+
+    def _charge(self, key: str, field: str | None) -> None:
+        if self.limiter is None:
+            return
+        wait = self.limiter.acquire(key)
+        if wait > 0:
+            raise RateLimited(
+                max(1, math.ceil(wait)), per_minute=self.limiter.per_minute, field=field
+            )
+
+
+def _client_host(scope: Scope) -> str | None:
+    client = scope.get("client")
+    return str(client[0]) if client else None
+
+
+def _route_path(scope: Scope) -> str:
+    path = str(scope["path"])
+    root_path = str(scope.get("root_path", ""))
+    if root_path and path.startswith(root_path):
+        return path[len(root_path) :] or "/"
+    return path
+
+
+# --- wiring -----------------------------------------------------------------------------------
+
+
+def install_security(app: FastAPI, container: Container) -> None:
+    """Add the layers above (after every other middleware, so they run first) and declare the
+    bearer scheme in the OpenAPI document."""
+    settings = container.settings
+    limiter = (
+        RateLimiter(settings.rate_limit_per_minute, settings.rate_limit_burst)
+        if settings.rate_limit_per_minute > 0
+        else None
+    )
+    app.add_middleware(AccessControl, container=container, limiter=limiter)
+    if settings.cors_origins:
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "HEAD", "POST", "PUT", "PATCH", "DELETE"],
+            allow_headers=["Authorization", "Content-Type"],
+            expose_headers=["Retry-After", "WWW-Authenticate"],
+        )
+    app.add_middleware(AllowedHosts, allowed=settings.allowed_hosts)
+    _declare_bearer_scheme(app)
+
+
+def _declare_bearer_scheme(app: FastAPI) -> None:
+    """Every operation needs the bearer scheme except OPEN_PATHS (FastAPI's documented way of
+    extending the generated document: wrap `app.openapi`)."""
+    generate = app.openapi
+
+    def openapi_with_security() -> dict[str, Any]:
+        document = generate()  # cached by FastAPI; the additions below are idempotent
+        components = document.setdefault("components", {})
+        components.setdefault("securitySchemes", {})[BEARER_SCHEME] = {
+            "type": "http",
+            "scheme": "bearer",
+            "description": (
+                "`Authorization: Bearer pbdag_<id>_<secret>`, from `pbdag token create`. "
+                "Scopes: GET needs `read`, other methods `write`; `admin` implies both."
+            ),
+        }
+        document["security"] = [{BEARER_SCHEME: []}]
+        for path in OPEN_PATHS:
+            for operation in document.get("paths", {}).get(path, {}).values():
+                operation["security"] = []
+        return document
+
+    app.openapi = openapi_with_security  # type: ignore[method-assign]
