@@ -16,7 +16,7 @@ $(VENV)/.installed: pyproject.toml
 	@touch $@
 
 demo: setup  ## the service on SQLite, fed live by the simulated robot
-	$(BIN)/python -m bench.demo_service
+	$(BIN)/python -m sim.demo_service
 
 serve: setup  ## the API with its in-process worker
 	$(BIN)/pbdag serve

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.sim.camera import CameraModel
-from bench.sim.demo import demo_script, demo_trajectory, demo_world, world_at
-from bench.sim.detector import detect
-from bench.sim.render import render
+from sim.camera import CameraModel
+from sim.demo import demo_script, demo_trajectory, demo_world, world_at
+from sim.detector import detect
+from sim.render import render
 
 RESULTS_PATH = Path(__file__).resolve().parent / "results" / "render.json"
 N_FRAMES = 100

@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-SCENARIOS = Path(__file__).resolve().parent / "scenarios"
+from sim import SCENARIOS_DIR
+
 DEFAULT_SCENARIOS = {
     "dynamic": ["hotel-suite.yaml", "bedroom.yaml", "office.yaml", "kitchen-real.yaml"],
     "fixtures": ["hotel-suite.yaml", "bedroom.yaml", "office.yaml", "kitchen-real.yaml"],
@@ -57,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     from bench.report import table, write_report
 
     protocol = args.protocol
-    scenarios = args.scenario or [SCENARIOS / name for name in DEFAULT_SCENARIOS[protocol]]
+    scenarios = args.scenario or [SCENARIOS_DIR / name for name in DEFAULT_SCENARIOS[protocol]]
     catalogue = DYNAMIC_METHODS if protocol == "dynamic" else FIXTURE_METHODS
     methods = (
         [method_named(name, catalogue) for name in args.methods]

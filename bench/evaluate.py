@@ -15,7 +15,7 @@ import httpx
 
 from api_schema import BatchIn
 from bench.methods import Method
-from bench.truth import FramePrediction, MethodEvent, PredictedNode
+from bench.predictions import FramePrediction, MethodEvent, PredictedNode
 from core.decide import decide
 from core.events import Event, SceneCreated
 from core.evolve import evolve, fold

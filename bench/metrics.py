@@ -16,15 +16,8 @@ import motmetrics as mm
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from bench.truth import (
-    FramePrediction,
-    FrameTruth,
-    MethodEvent,
-    PredictedNode,
-    ScheduledEvent,
-    TruthFixture,
-    TruthObject,
-)
+from bench.predictions import FramePrediction, MethodEvent, PredictedNode
+from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject
 
 # The method event that shows a scheduled change was noticed, per scheduled event type.
 RECALLING_EVENT_TYPE = {

@@ -21,9 +21,9 @@ from bench.metrics import (
     identity_metrics,
     presence_f1,
 )
-from bench.scenario import load_scenario
-from bench.stream import SimRun, simulate, wire_batches
-from bench.truth import FrameTruth
+from sim.scenario import load_scenario
+from sim.stream import SimRun, simulate, wire_batches
+from sim.truth import FrameTruth
 
 FRAMES_PER_BATCH = 2  # a batch is the update step t: two frames, as the robot posts them
 

@@ -9,13 +9,13 @@ from fastapi.testclient import TestClient
 from bench.evaluate import run_in_process, run_via_service
 from bench.methods import DYNAMIC_METHODS, method_named
 from bench.protocols import FRAMES_PER_BATCH, acquired_truth
-from bench.scenario import load_scenario
-from bench.stream import simulate, wire_batches
 from service.app import create_app
 from service.bootstrap import build_container
 from service.settings import Settings
+from sim.scenario import load_scenario
+from sim.stream import simulate, wire_batches
 
-HOTEL = Path(__file__).resolve().parents[2] / "bench" / "scenarios" / "hotel-suite.yaml"
+HOTEL = Path(__file__).resolve().parents[2] / "sim" / "scenarios" / "hotel-suite.yaml"
 
 
 def short_stream():

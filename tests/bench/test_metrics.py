@@ -15,16 +15,8 @@ from bench.metrics import (
     mean_std,
     presence_f1,
 )
-from bench.truth import (
-    FramePrediction,
-    FrameTruth,
-    MethodEvent,
-    PredictedNode,
-    ScheduledEvent,
-    TruthFixture,
-    TruthObject,
-    Vec3,
-)
+from bench.predictions import FramePrediction, MethodEvent, PredictedNode
+from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject, Vec3
 
 ORIGIN: Vec3 = (0.0, 0.0, 0.0)
 FAR: Vec3 = (3.0, 0.0, 0.0)

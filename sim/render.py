@@ -7,8 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
-from bench.sim.camera import CameraModel
-from bench.sim.world import World, build_scene
+from sim.camera import CameraModel
+from sim.world import World, build_scene
 
 INVALID_GEOMETRY = o3d.t.geometry.RaycastingScene.INVALID_ID
 

@@ -1,10 +1,8 @@
-"""Ground truth and method output per frame: the records the simulator, runner and metrics share."""
+"""Ground truth per frame: the records the simulator produces and the evaluation judges against."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
 Vec3 = tuple[float, float, float]
 
@@ -47,32 +45,3 @@ class ScheduledEvent:
     type: str  # "appear", "move", "disappear" or "transfer"
     object_id: str
     parent: str | None = None  # the new supporting fixture for "appear" and "transfer"
-
-
-@dataclass(frozen=True)
-class PredictedNode:
-    """One node of the graph a method published."""
-
-    track_id: str
-    label: str
-    center: Vec3
-    parent: str | None
-    kind: str = "object"  # "object" or "fixture"
-
-
-@dataclass(frozen=True)
-class FramePrediction:
-    """The graph a method published after processing one frame."""
-
-    frame_index: int
-    nodes: tuple[PredictedNode, ...]
-
-
-@dataclass(frozen=True)
-class MethodEvent:
-    """A typed event a method emitted (add, confirm, update, move, reparent, demote, remove)."""
-
-    frame: int  # index of the frame being processed when the event was emitted
-    type: str
-    track_id: str
-    details: Mapping[str, Any]

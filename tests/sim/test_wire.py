@@ -11,9 +11,9 @@ import pytest
 from PIL import Image
 from pycocotools import mask as coco_mask
 
-from bench.sim.camera import CameraModel, look_at
-from bench.sim.detector import SimDetection
-from bench.sim.wire import (
+from sim.camera import CameraModel, look_at
+from sim.detector import SimDetection
+from sim.wire import (
     encode_depth_f32,
     encode_depth_png16,
     encode_detection,

@@ -1,6 +1,6 @@
 """The newcomer's demo: the service on its SQLite default, fed live by the simulated robot.
 
-    python -m bench.demo_service [--port 8000] [--frames 120] [--pace 0.15] [--exit]
+    python -m sim.demo_service [--port 8000] [--frames 120] [--pace 0.15] [--exit]
 
 Starts `pbdag serve` in this process (API + worker), streams the demo run into a new scene,
 prints the graph and where to look, then keeps serving until Ctrl-C (or exits with --exit).
@@ -17,9 +17,9 @@ import time
 import httpx
 import uvicorn
 
-from bench.robot import run_robot
 from service.app import create_app
 from service.settings import Settings
+from sim.robot import run_robot
 
 
 def free_port(preferred: int) -> int:

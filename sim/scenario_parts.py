@@ -6,8 +6,8 @@ import math
 from dataclasses import dataclass, fields
 from typing import Any
 
-from bench.sim.camera import CameraModel
-from bench.sim.scenario_fields import (
+from sim.camera import CameraModel
+from sim.scenario_fields import (
     ScenarioError,
     Section,
     boolean,
@@ -17,7 +17,7 @@ from bench.sim.scenario_fields import (
     text,
     vector,
 )
-from bench.sim.world import Box
+from sim.world import Box
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.sim.camera import CameraModel, look_at
-from bench.sim.render import add_kinect_noise, render
-from bench.sim.world import Box, World
+from sim.camera import CameraModel, look_at
+from sim.render import add_kinect_noise, render
+from sim.world import Box, World
 
 CAMERA = CameraModel()
 EYE = (1.0, 4.0, 1.5)

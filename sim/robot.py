@@ -12,11 +12,11 @@ import httpx
 import numpy as np
 from tqdm import tqdm
 
-from bench.sim.camera import CameraModel
-from bench.sim.demo import DEMO_AMBIGUITY, demo_script, demo_trajectory, demo_world, world_at
-from bench.sim.detector import detect, detect_fixtures
-from bench.sim.render import add_kinect_noise, render
-from bench.sim.wire import make_batch, make_frame
+from sim.camera import CameraModel
+from sim.demo import DEMO_AMBIGUITY, demo_script, demo_trajectory, demo_world, world_at
+from sim.detector import detect, detect_fixtures
+from sim.render import add_kinect_noise, render
+from sim.wire import make_batch, make_frame
 
 FRAME_PERIOD_SECONDS = 0.1  # simulated sensor clock: 10 Hz
 CONNECT_ATTEMPTS = 6  # with doubling from 0.2 s: about 6 s for the service to come up
@@ -155,7 +155,7 @@ def run_robot(
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Command line: python -m bench.robot --url http://localhost:8000."""
+    """Command line: python -m sim.robot --url http://localhost:8000."""
     parser = argparse.ArgumentParser(description="Stream a simulated robot run into PBD-AG.")
     parser.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
     parser.add_argument("--frames", type=int, default=120)

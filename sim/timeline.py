@@ -5,15 +5,12 @@ from __future__ import annotations
 import bisect
 import dataclasses
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bench.sim.world import Box, World, object_on
-from bench.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject
-
-if TYPE_CHECKING:
-    from bench.scenario import Scenario
+from sim.scenario_spec import Scenario
+from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject
+from sim.world import Box, World, object_on
 
 
 @dataclass(frozen=True)

@@ -4,17 +4,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from bench.sim.scenario_fields import ScenarioError
-from bench.sim.scenario_parts import EventSpec, FixtureSpec, ObjectSpec, OccluderSpec, WallSpec
-from bench.sim.trajectory import path_samples, trajectory_poses
-from bench.sim.world import Box
-
-if TYPE_CHECKING:
-    from bench.scenario import Scenario
+from sim.scenario_fields import ScenarioError
+from sim.scenario_parts import EventSpec, FixtureSpec, ObjectSpec, OccluderSpec, WallSpec
+from sim.scenario_spec import Scenario
+from sim.trajectory import path_samples, trajectory_poses
+from sim.world import Box
 
 CAMERA_CLEARANCE_M = 0.1  # the camera keeps this far from furniture footprints and walls
 

@@ -10,8 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from bench.sim.render import Render
-from bench.sim.world import Box, World
+from sim.render import Render
+from sim.world import Box, World
 
 # 8-connected growth, so a leak of k pixels reaches k pixels out diagonally too.
 LEAK_STRUCTURE = np.ones((3, 3), dtype=bool)

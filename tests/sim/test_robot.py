@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import bench.robot as robot
+import sim.robot as robot
 from api_schema import BatchIn
-from bench.sim.detector import FIXTURE_VOCABULARY
+from sim.detector import FIXTURE_VOCABULARY
 
 SCENE_ID = "scene-42"
 

@@ -11,10 +11,11 @@ from typing import Any
 
 import numpy as np
 
-from bench.scenario import Scenario, load_scenario
-from bench.sim.recorded import composite
-from bench.sim.render import render
-from bench.sim.timeline import Timeline
+from sim.recorded import composite
+from sim.render import render
+from sim.scenario import Scenario, load_scenario
+from sim.stream import frame_source
+from sim.timeline import Timeline
 
 VISIT_GAP_FRAMES = 3  # a sighting interrupted this briefly is still the same visit
 
@@ -37,8 +38,6 @@ def _counts(instance: np.ndarray, size: int) -> np.ndarray:
 
 def coverage(scenario: Scenario) -> dict[str, Any]:
     """Per event: frames its object is detectable before/after; revisits; occlusion counts."""
-    from bench.stream import frame_source  # the stream imports this package: import late
-
     timeline, source = Timeline(scenario), frame_source(scenario)
     object_pixels = scenario.detector.min_visible_pixels
     fixture_pixels = (

@@ -9,16 +9,16 @@ from typing import Any
 import numpy as np
 import pytest
 
-from bench.scenario import REPO_ROOT, ScenarioError, load_scenario
-from bench.sim.camera import CameraModel
-from bench.sim.coverage import coverage
-from bench.sim.recorded import composite, load_recorded
-from bench.sim.render import render
-from bench.sim.trajectory import trajectory_poses
-from bench.sim.world import Box, World
-from bench.stream import SimRun, simulate
+from sim.camera import CameraModel
+from sim.coverage import coverage
+from sim.recorded import composite, load_recorded
+from sim.render import render
+from sim.scenario import REPO_ROOT, ScenarioError, load_scenario
+from sim.stream import SimRun, simulate
+from sim.trajectory import trajectory_poses
+from sim.world import Box, World
 
-SCENARIOS = REPO_ROOT / "bench" / "scenarios"
+SCENARIOS = REPO_ROOT / "sim" / "scenarios"
 HOTEL = SCENARIOS / "hotel-suite.yaml"
 KITCHEN = SCENARIOS / "kitchen-real.yaml"
 SHORT_FRAMES = 20

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from bench.sim.scenario_fields import (
+from sim.scenario_fields import (
     ScenarioError,
     Section,
     count,
@@ -83,7 +83,7 @@ def parse_trajectory(value: Any, where: str) -> TrajectorySpec:
 
 @dataclass(frozen=True)
 class FixtureDetectorSpec:
-    """Settings of the fixture segmenter (see `bench.sim.detector.detect_fixtures`)."""
+    """Settings of the fixture segmenter (see `sim.detector.detect_fixtures`)."""
 
     recall: float = 1.0
     score_noise: float = 0.02

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.sim.world import Box, World, box_corners, build_scene, object_on
+from sim.world import Box, World, box_corners, build_scene, object_on
 
 TABLE = Box("table", "table", (2.0, 2.0, 0.375), (1.2, 0.8, 0.75), kind="fixture")
 MUG = object_on(TABLE, "mug", "mug", (0.08, 0.08, 0.10), at=(0.3, -0.1))

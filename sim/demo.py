@@ -8,8 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bench.sim.camera import look_at
-from bench.sim.world import Box, World, object_on
+from sim.camera import look_at
+from sim.world import Box, World, object_on
 
 TABLE = Box("table", "table", (3.0, 2.3, 0.375), (1.2, 0.8, 0.75), kind="fixture")
 COUNTER = Box("counter", "counter", (3.0, 4.6, 0.45), (2.0, 0.6, 0.9), kind="fixture")

@@ -11,14 +11,14 @@ import pytest
 from PIL import Image
 
 from api_schema import BatchIn
-from bench.scenario import REPO_ROOT, load_scenario
-from bench.sim.render import render
-from bench.sim.spurious import FALSE_POSITIVE_PREFIX
-from bench.sim.timeline import Timeline
-from bench.stream import frame_source, load_run, save_run, simulate, wire_batches
+from sim.render import render
+from sim.scenario import REPO_ROOT, load_scenario
+from sim.spurious import FALSE_POSITIVE_PREFIX
+from sim.stream import frame_source, load_run, save_run, simulate, wire_batches
+from sim.timeline import Timeline
 
-HOTEL = REPO_ROOT / "bench" / "scenarios" / "hotel-suite.yaml"
-OFFICE = REPO_ROOT / "bench" / "scenarios" / "office.yaml"
+HOTEL = REPO_ROOT / "sim" / "scenarios" / "hotel-suite.yaml"
+OFFICE = REPO_ROOT / "sim" / "scenarios" / "office.yaml"
 
 
 def test_truth_visible_pixels_match_the_instance_map_and_exact_masks() -> None:

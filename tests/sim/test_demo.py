@@ -7,8 +7,8 @@ from collections import defaultdict
 import numpy as np
 import pytest
 
-from bench.sim.camera import CameraModel
-from bench.sim.demo import (
+from sim.camera import CameraModel
+from sim.demo import (
     COUNTER,
     DEMO_AMBIGUITY,
     DESK,
@@ -18,7 +18,7 @@ from bench.sim.demo import (
     demo_world,
     world_at,
 )
-from bench.sim.render import render
+from sim.render import render
 
 N_FRAMES = 120
 MIN_PIXELS = 150  # the robot's object detector threshold

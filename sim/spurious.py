@@ -8,9 +8,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from bench.sim.detector import SimDetection
-from bench.sim.render import Render
-from bench.sim.world import World
+from sim.detector import SimDetection
+from sim.render import Render
+from sim.world import World
 
 FALSE_POSITIVE_PREFIX = "fp-"  # object_id of a false positive: no scenario object behind it
 BLOB_AREA_RANGE = (200.0, 800.0)  # pixels of a false-positive ellipse before image clipping

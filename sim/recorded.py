@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from bench.sim.camera import CameraModel
-from bench.sim.render import Render
+from sim.camera import CameraModel
+from sim.render import Render
 
 FLOOR_PERCENTILE = 2.0  # of point heights: low enough for the floor, robust to stray returns
 FLOOR_SAMPLE_FRAMES = 12  # frames back-projected for the floor estimate

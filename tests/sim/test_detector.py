@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.sim.camera import CameraModel
-from bench.sim.detector import (
+from sim.camera import CameraModel
+from sim.detector import (
     DISTRACTOR_COUNT,
     FIXTURE_VOCABULARY,
     TRUE_CLASS_SCORE,
@@ -14,8 +14,8 @@ from bench.sim.detector import (
     fixture_class_scores,
     object_embedding,
 )
-from bench.sim.render import Render
-from bench.sim.world import Box, World
+from sim.render import Render
+from sim.world import Box, World
 
 CAMERA = CameraModel(width=80, height=60)
 WORLD = World(

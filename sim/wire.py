@@ -11,8 +11,8 @@ import numpy as np
 from PIL import Image
 from pycocotools import mask as coco_mask
 
-from bench.sim.camera import CameraModel
-from bench.sim.detector import SimDetection
+from sim.camera import CameraModel
+from sim.detector import SimDetection
 
 UINT16_MAX = np.iinfo(np.uint16).max
 

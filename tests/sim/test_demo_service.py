@@ -17,7 +17,7 @@ def test_demo_runs_to_its_summary_and_freezes_a_baseline(tmp_path):
         [
             sys.executable,
             "-m",
-            "bench.demo_service",
+            "sim.demo_service",
             "--frames",
             "60",
             "--pace",

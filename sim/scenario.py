@@ -3,19 +3,16 @@
 from __future__ import annotations
 
 import copy
-import hashlib
-import json
 import re
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from bench.sim.scenario_checks import check_events, check_layout, check_trajectory
-from bench.sim.scenario_fields import ScenarioError, Section, positive, sequence, vector
-from bench.sim.scenario_parts import (
+from sim.scenario_checks import check_events, check_layout, check_trajectory
+from sim.scenario_fields import ScenarioError, Section, positive, sequence, vector
+from sim.scenario_parts import (
     CameraSpec,
     EventSpec,
     FixtureSpec,
@@ -29,7 +26,7 @@ from bench.sim.scenario_parts import (
     parse_occluder,
     parse_wall,
 )
-from bench.sim.scenario_settings import (
+from sim.scenario_settings import (
     BackgroundSpec,
     DetectorSpec,
     TrajectorySpec,
@@ -37,6 +34,7 @@ from bench.sim.scenario_settings import (
     parse_detector,
     parse_trajectory,
 )
+from sim.scenario_spec import Scenario
 
 __all__ = [
     "REPO_ROOT",
@@ -56,56 +54,9 @@ __all__ = [
 ]
 
 # Recorded backgrounds name their data folder relative to the repository root (the folder
-# holding `bench/`), so one spelling works whichever folder the scenario file sits in.
+# holding `sim/`), so one spelling works whichever folder the scenario file sits in.
 REPO_ROOT = Path(__file__).resolve().parent.parent
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9._-]+$")  # names end up inside wire batch ids
-
-
-@dataclass(frozen=True)
-class Scenario:
-    """A validated scenario; `raw` keeps the effective YAML mapping for hashing and caching."""
-
-    name: str
-    seed: int
-    frames: int
-    camera: CameraSpec
-    room_size: tuple[float, float, float]
-    walls: tuple[WallSpec, ...]
-    fixtures: tuple[FixtureSpec, ...]
-    occluders: tuple[OccluderSpec, ...]
-    objects: tuple[ObjectSpec, ...]  # every object, including those only an appear event adds
-    trajectory: TrajectorySpec | None  # None when a recorded background supplies the poses
-    events: tuple[EventSpec, ...]  # sorted by frame
-    detector: DetectorSpec
-    background: BackgroundSpec | None
-    frame_period: float
-    source: Path | None = field(default=None, compare=False)
-    raw: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
-
-    @property
-    def sha256(self) -> str:
-        """Hash of the effective scenario (overrides included), as canonical JSON."""
-        canonical = json.dumps(self.raw, sort_keys=True, separators=(",", ":"))
-        return hashlib.sha256(canonical.encode("utf-8")).hexdigest()
-
-    def fixture(self, fixture_id: str) -> FixtureSpec:
-        """The fixture with this id."""
-        for spec in self.fixtures:
-            if spec.id == fixture_id:
-                return spec
-        raise KeyError(f"no fixture {fixture_id!r} in scenario {self.name!r}")
-
-    def object(self, object_id: str) -> ObjectSpec:
-        """The object with this id."""
-        for spec in self.objects:
-            if spec.id == object_id:
-                return spec
-        raise KeyError(f"no object {object_id!r} in scenario {self.name!r}")
-
-    @property
-    def object_labels(self) -> tuple[str, ...]:
-        """Distinct object labels, in first-seen order (label confusion and false positives)."""
-        return tuple(dict.fromkeys(spec.label for spec in self.objects))
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 
-from bench.sim.camera import look_at
-from bench.sim.scenario_settings import TrajectorySpec
+from sim.camera import look_at
+from sim.scenario_settings import TrajectorySpec
 
 PATH_SAMPLE_SPACING_M = 0.05  # path checks test points this far apart: thinner than any wall
 

@@ -15,16 +15,16 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from bench.scenario import Scenario, load_scenario, scenario_from_dict
-from bench.sim.camera import CameraModel
-from bench.sim.detector import SimDetection, detect, detect_fixtures
-from bench.sim.recorded import RecordedSequence, composite, load_recorded
-from bench.sim.render import add_kinect_noise, render
-from bench.sim.spurious import confuse_labels, false_positives
-from bench.sim.timeline import Timeline
-from bench.sim.trajectory import trajectory_poses
-from bench.sim.wire import make_batch, make_frame
-from bench.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject
+from sim.camera import CameraModel
+from sim.detector import SimDetection, detect, detect_fixtures
+from sim.recorded import RecordedSequence, composite, load_recorded
+from sim.render import add_kinect_noise, render
+from sim.scenario import Scenario, load_scenario, scenario_from_dict
+from sim.spurious import confuse_labels, false_positives
+from sim.timeline import Timeline
+from sim.trajectory import trajectory_poses
+from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject
+from sim.wire import make_batch, make_frame
 
 
 @dataclass(frozen=True, eq=False)
