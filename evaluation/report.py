@@ -13,7 +13,7 @@ import matplotlib
 matplotlib.use("Agg")  # files only, no screen
 import matplotlib.pyplot as plt
 
-from bench.metrics import mean_std
+from evaluation.metrics import mean_std
 
 REPO = Path(__file__).resolve().parents[1]
 DYNAMIC_COLUMNS = (("idf1", "IDF1↑"), ("id_presence_f1", "ID-Pres.↑"), ("id_switches", "IDS↓"))

@@ -16,7 +16,7 @@ import motmetrics as mm
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from bench.predictions import FramePrediction, MethodEvent, PredictedNode
+from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
 from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject
 
 # The method event that shows a scheduled change was noticed, per scheduled event type.

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from bench.report import table, write_report
+from evaluation.report import table, write_report
 
 
 def run(method, idf1, recalled, absent, eligible):

@@ -6,9 +6,9 @@ from pathlib import Path
 
 from fastapi.testclient import TestClient
 
-from bench.evaluate import run_in_process, run_via_service
-from bench.methods import DYNAMIC_METHODS, method_named
-from bench.protocols import FRAMES_PER_BATCH, acquired_truth
+from evaluation.evaluate import run_in_process, run_via_service
+from evaluation.methods import DYNAMIC_METHODS, method_named
+from evaluation.protocols import FRAMES_PER_BATCH, acquired_truth
 from service.app import create_app
 from service.bootstrap import build_container
 from service.settings import Settings

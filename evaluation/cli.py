@@ -37,7 +37,7 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
             help="scenario YAML files (default: every shipped one)",
         )
         parser.add_argument("--seeds", nargs="+", type=int, default=[7, 17, 27])
-        parser.add_argument("--out", type=Path, default=Path("bench/results") / protocol)
+        parser.add_argument("--out", type=Path, default=Path("evaluation/results") / protocol)
         parser.add_argument(
             "--methods", nargs="+", help="method names (default: all of the protocol's)"
         )
@@ -53,9 +53,9 @@ def run(args: argparse.Namespace) -> int:
     # Imported here so that `pbdag serve` never loads the simulator (open3d) just to build its CLI.
     import httpx
 
-    from bench.methods import DYNAMIC_METHODS, FIXTURE_METHODS, method_named
-    from bench.protocols import run_protocol
-    from bench.report import table, write_report
+    from evaluation.methods import DYNAMIC_METHODS, FIXTURE_METHODS, method_named
+    from evaluation.protocols import run_protocol
+    from evaluation.report import table, write_report
 
     protocol = args.protocol
     scenarios = args.scenario or [SCENARIOS_DIR / name for name in DEFAULT_SCENARIOS[protocol]]

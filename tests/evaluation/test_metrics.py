@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from bench.metrics import (
+from evaluation.metrics import (
     event_recall,
     false_absence,
     fixture_scores,
@@ -15,7 +15,7 @@ from bench.metrics import (
     mean_std,
     presence_f1,
 )
-from bench.predictions import FramePrediction, MethodEvent, PredictedNode
+from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
 from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject, Vec3
 
 ORIGIN: Vec3 = (0.0, 0.0, 0.0)

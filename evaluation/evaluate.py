@@ -14,14 +14,14 @@ from typing import Any
 import httpx
 
 from api_schema import BatchIn
-from bench.methods import Method
-from bench.predictions import FramePrediction, MethodEvent, PredictedNode
 from core.decide import decide
 from core.events import Event, SceneCreated
 from core.evolve import evolve, fold
 from core.graph import is_published
 from core.params import Params
 from core.state import SceneState
+from evaluation.methods import Method
+from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
 from service.codec import decode_batch
 
 WireBatch = tuple[

@@ -11,9 +11,9 @@ from typing import Any
 import httpx
 from tqdm import tqdm
 
-from bench.evaluate import MethodRun, WireBatch, run_in_process, run_via_service
-from bench.methods import Method
-from bench.metrics import (
+from evaluation.evaluate import MethodRun, WireBatch, run_in_process, run_via_service
+from evaluation.methods import Method
+from evaluation.metrics import (
     event_recall,
     false_absence,
     fixture_scores,
