@@ -9,3 +9,4 @@ from pathlib import Path
 # The shipped scenario files (package data). Importing this package loads nothing heavy, so the
 # `pbdag eval` plugin can name them without pulling in open3d.
 SCENARIOS_DIR = Path(__file__).resolve().parent / "scenarios"
+DEMO_SCENARIO = SCENARIOS_DIR / "demo.yaml"  # the world `make demo` walks

@@ -2,8 +2,9 @@
 
     python -m sim.demo_service [--port 8000] [--frames 120] [--pace 0.15] [--exit]
 
-Starts `pbdag serve` in this process (API + worker), streams the demo run into a new scene,
-prints the graph and where to look, then keeps serving until Ctrl-C (or exits with --exit).
+Starts `pbdag serve` in this process (API + worker), lets the simulated robot stream the demo
+scenario (sim/scenarios/demo.yaml) into a new scene, prints the graph and where to look, then
+keeps serving until Ctrl-C (or exits with --exit).
 """
 
 from __future__ import annotations
@@ -101,7 +102,9 @@ def main(argv: list[str] | None = None) -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--port", type=int, default=8000)
-    parser.add_argument("--frames", type=int, default=120)
+    parser.add_argument(
+        "--frames", type=int, default=None, help="shorten the demo to N frames (it has 120)"
+    )
     parser.add_argument("--frames-per-batch", type=int, default=2)
     parser.add_argument(
         "--pace", type=float, default=0.15, help="seconds between batches, to watch it live"

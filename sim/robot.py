@@ -1,35 +1,27 @@
-"""A simulated robot: walks the demo scenario and posts observation batches to the HTTP API."""
+"""A simulated robot: walks a scenario (the demo's by default) and posts its batches to the HTTP API.
+
+The batches are the stream's (`sim.stream`), the same the evaluation reads: this module only
+speaks HTTP.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import httpx
-import numpy as np
 from tqdm import tqdm
 
-from sim.camera import CameraModel
-from sim.demo import DEMO_AMBIGUITY, demo_script, demo_trajectory, demo_world, world_at
-from sim.detector import detect, detect_fixtures
-from sim.render import add_kinect_noise, render
-from sim.wire import make_batch, make_frame
+from sim import DEMO_SCENARIO
+from sim.scenario import load_scenario
+from sim.stream import iter_frames, iter_wire_batches
 
-FRAME_PERIOD_SECONDS = 0.1  # simulated sensor clock: 10 Hz
 CONNECT_ATTEMPTS = 6  # with doubling from 0.2 s: about 6 s for the service to come up
 FIRST_BACKOFF_SECONDS = 0.2
-DETECTOR_SETTINGS: dict[str, Any] = {
-    "recall": 0.95,
-    "embedding_noise": 0.05,
-    "boundary_leak_px": 1,
-}
-FIXTURE_DETECTOR_SETTINGS: dict[str, Any] = {
-    "recall": 0.9,
-    "ambiguity": DEMO_AMBIGUITY,
-}
 
 
 def _with_retries(
@@ -78,74 +70,44 @@ def post_batch(client: httpx.Client, base_url: str, scene_id: str, batch: dict[s
     _expect(response, 202, f"post batch {batch['batch_id']}")
 
 
-def _chunks(items: Iterable[dict[str, Any]], size: int) -> Iterator[list[dict[str, Any]]]:
-    """Consecutive groups of `size` items; the last group may be shorter."""
-    group: list[dict[str, Any]] = []
-    for item in items:
-        group.append(item)
-        if len(group) == size:
-            yield group
-            group = []
-    if group:
-        yield group
-
-
-def simulate_frames(n_frames: int, seed: int) -> Iterator[dict[str, Any]]:
-    """Encoded frames of the demo scenario: rendered, noised and detected, in order."""
-    rng = np.random.default_rng(seed)
-    camera = CameraModel()
-    base = demo_world()
-    script = demo_script(n_frames)
-    for frame_index, pose in enumerate(demo_trajectory(n_frames)):
-        world = world_at(frame_index, base, script)
-        view = render(world, camera, pose)
-        detections = detect(view, world, rng, **DETECTOR_SETTINGS)
-        detections += detect_fixtures(view, world, rng, **FIXTURE_DETECTOR_SETTINGS)
-        depth = add_kinect_noise(view.depth, rng)
-        yield make_frame(
-            f"f{frame_index:06d}",
-            frame_index * FRAME_PERIOD_SECONDS,
-            camera,
-            pose,
-            depth,
-            detections,
-        )
-
-
 def run_robot(
     base_url: str,
     *,
+    scenario_path: str | Path = DEMO_SCENARIO,
     scene_name: str = "sim-demo",
-    frames: int = 120,
+    frames: int | None = None,
     frames_per_batch: int = 2,
     seed: int = 7,
     pace_seconds: float = 0.0,
     progress: bool = True,
     client: httpx.Client | None = None,
 ) -> str:
-    """Create a scene, stream the demo run into it batch by batch, and return the scene id."""
+    """Create a scene, stream the scenario into it batch by batch, and return the scene id.
+
+    `frames` shortens (or stretches) the scenario with its story intact (`load_scenario`).
+    """
     if frames_per_batch < 1:
         raise ValueError("frames_per_batch must be at least 1")
+    scenario = load_scenario(scenario_path, frames=frames)
     base_url = base_url.rstrip("/")
     own_client = client is None
     http = client if client is not None else httpx.Client(timeout=30.0)
     try:
         scene_id = create_scene(http, base_url, scene_name)
-        n_batches = -(-frames // frames_per_batch)
-        frame_groups = _chunks(simulate_frames(frames, seed), frames_per_batch)
+        n_batches = -(-scenario.frames // frames_per_batch)
+        batches = iter_wire_batches(scenario, seed, iter_frames(scenario, seed), frames_per_batch)
         progress_bar = tqdm(
-            total=frames,
+            total=scenario.frames,
             desc=f"scene {scene_id}",
             unit="frame",
             file=sys.stderr,
             disable=not progress,
         )
         with progress_bar:
-            for batch_index, frame_group in enumerate(frame_groups):
-                batch = make_batch(f"{scene_id}-b{batch_index:05d}", frame_group)
+            for batch_index, (_, batch) in enumerate(batches):
                 post_batch(http, base_url, scene_id, batch)
                 progress_bar.set_postfix(batch=f"{batch_index + 1}/{n_batches}", refresh=False)
-                progress_bar.update(len(frame_group))
+                progress_bar.update(len(batch["frames"]))
                 if pace_seconds > 0:
                     time.sleep(pace_seconds)
         return scene_id
@@ -158,7 +120,10 @@ def main(argv: list[str] | None = None) -> None:
     """Command line: python -m sim.robot --url http://localhost:8000."""
     parser = argparse.ArgumentParser(description="Stream a simulated robot run into PBD-AG.")
     parser.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
-    parser.add_argument("--frames", type=int, default=120)
+    parser.add_argument(
+        "--scenario", type=Path, default=DEMO_SCENARIO, help="scenario file (default: the demo)"
+    )
+    parser.add_argument("--frames", type=int, default=None, help="shorten the scenario to N frames")
     parser.add_argument("--frames-per-batch", type=int, default=2)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--pace", type=float, default=0.0, help="seconds to wait between batches")
@@ -166,6 +131,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     scene_id = run_robot(
         args.url,
+        scenario_path=args.scenario,
         scene_name=args.name,
         frames=args.frames,
         frames_per_batch=args.frames_per_batch,

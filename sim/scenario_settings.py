@@ -34,15 +34,23 @@ class Waypoint:
 
 @dataclass(frozen=True)
 class TrajectorySpec:
-    """`waypoints`: a closed polyline walked `loops` times; `orbit`: a circle around `center`."""
+    """`waypoints`: a closed polyline walked `loops` times; `orbit`: an ellipse around `center`.
+
+    An orbit looks at `look_at[k % len(look_at)]` during block k of `look_blocks` equal blocks
+    of frames per lap, and its eye rises and falls by `bob_amplitude` metres `bob_cycles` times
+    per lap (a circle at constant height when both radii are equal and the amplitude is 0).
+    """
 
     type: str
     loops: int = 1
     points: tuple[Waypoint, ...] = ()
     center: Vec2 = (0.0, 0.0)
-    radius: float = 0.0
-    look_at: Vec3 = (0.0, 0.0, 0.0)
+    radii: Vec2 = (0.0, 0.0)  # along x and y
+    look_at: tuple[Vec3, ...] = ()
+    look_blocks: int = 1
     start_angle: float = 0.0
+    bob_amplitude: float = 0.0
+    bob_cycles: float = 0.0
 
 
 def _waypoint(value: Any, where: str) -> Waypoint:
@@ -56,6 +64,30 @@ def _waypoint(value: Any, where: str) -> Waypoint:
     return Waypoint((at[0], at[1], at[2] if len(at) == 3 else None), look)
 
 
+def _radii(value: Any, where: str) -> Vec2:
+    """An orbit's `radius`: one number (a circle) or [along x, along y] (an ellipse)."""
+    if isinstance(value, list | tuple):
+        return vector(value, where, 2, positive_only=True)  # type: ignore[no-any-return]
+    radius = positive(value, where)
+    return (radius, radius)
+
+
+def _look_targets(value: Any, where: str) -> tuple[Vec3, ...]:
+    """An orbit's `look_at`: one [x, y, z] point, or a list of them visited in turn."""
+    if isinstance(value, list) and value and isinstance(value[0], list | tuple):
+        return tuple(sequence(value, where, lambda item, at: vector(item, at, 3)))
+    return (vector(value, where, 3),)
+
+
+def _bob(value: Any, where: str) -> tuple[float, float]:
+    """The `bob` section of an orbit: amplitude [m] and cycles per lap of the eye height."""
+    section = Section(value, where)
+    amplitude = section.get("amplitude", lambda item, at: positive(item, at, zero=True))
+    cycles = section.get("cycles", lambda item, at: positive(item, at, zero=True))
+    section.finish()
+    return amplitude, cycles
+
+
 def parse_trajectory(value: Any, where: str) -> TrajectorySpec:
     """The `trajectory` section."""
     section = Section(value, where)
@@ -67,13 +99,21 @@ def parse_trajectory(value: Any, where: str) -> TrajectorySpec:
             raise ScenarioError(f"{where}.points: needs at least two waypoints")
         spec = TrajectorySpec(kind, loops, points=points)
     elif kind == "orbit":
+        targets = section.get("look_at", _look_targets)
+        blocks = section.get(
+            "look_blocks", lambda item, at: int(positive(item, at, integer=True)), len(targets)
+        )
+        bob_amplitude, bob_cycles = section.get("bob", _bob, (0.0, 0.0))
         spec = TrajectorySpec(
             kind,
             loops,
             center=section.get("center", lambda item, at: vector(item, at, 2)),
-            radius=section.get("radius", positive),
-            look_at=section.get("look_at", lambda item, at: vector(item, at, 3)),
+            radii=section.get("radius", _radii),
+            look_at=targets,
+            look_blocks=blocks,
             start_angle=section.get("start_angle", number, 0.0),
+            bob_amplitude=bob_amplitude,
+            bob_cycles=bob_cycles,
         )
     else:
         raise ScenarioError(f"{where}.type: {kind!r} is not one of waypoints, orbit")

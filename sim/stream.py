@@ -1,13 +1,19 @@
-"""A scenario turned into a stream of posed depth frames, detections and ground truth."""
+"""A scenario turned into a stream of posed depth frames, detections and ground truth.
+
+The one render+detect loop of the project: the evaluation reads its batches from `simulate` and
+`wire_batches`, the robot (and so the demo) posts the batches of `iter_frames` and
+`iter_wire_batches`, so a (scenario, seed) pair gives the same observations either way.
+"""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import json
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -151,23 +157,32 @@ def simulate(scenario: Scenario, seed: int, *, progress: bool = False) -> SimRun
     )
 
 
-def frame_id(run: SimRun, frame_index: int) -> str:
+def frame_id(scenario: Scenario, seed: int, frame_index: int) -> str:
     """Wire frame id: unique per scenario, seed and frame."""
-    return f"{run.scenario.name}-s{run.seed}-f{frame_index:05d}"
+    return f"{scenario.name}-s{seed}-f{frame_index:05d}"
 
 
-def wire_batches(
-    run: SimRun, frames_per_batch: int = 2, depth_encoding: str = "png16"
-) -> list[tuple[int, dict[str, Any]]]:
-    """Consecutive frames grouped into wire batches, each with the index of its last frame."""
+def iter_wire_batches(
+    scenario: Scenario,
+    seed: int,
+    frames: Iterable[SimFrame],
+    frames_per_batch: int = 2,
+    depth_encoding: str = "png16",
+) -> Iterator[tuple[int, dict[str, Any]]]:
+    """Consecutive frames grouped into wire batches as they arrive, each with its last frame index.
+
+    Frames are consumed lazily, so the robot holds one batch in memory, not the whole run.
+    """
     if frames_per_batch < 1:
         raise ValueError("frames_per_batch must be at least 1")
-    batches = []
-    for batch_index, start in enumerate(range(0, len(run.frames), frames_per_batch)):
-        chunk = run.frames[start : start + frames_per_batch]
+    remaining = iter(frames)
+    for batch_index in itertools.count():
+        chunk = list(itertools.islice(remaining, frames_per_batch))
+        if not chunk:
+            return
         encoded = [
             make_frame(
-                frame_id(run, frame.frame_index),
+                frame_id(scenario, seed, frame.frame_index),
                 frame.timestamp,
                 frame.camera,
                 frame.pose,
@@ -177,9 +192,17 @@ def wire_batches(
             )
             for frame in chunk
         ]
-        batch_id = f"{run.scenario.name}-s{run.seed}-b{batch_index:05d}"
-        batches.append((chunk[-1].frame_index, make_batch(batch_id, encoded)))
-    return batches
+        batch_id = f"{scenario.name}-s{seed}-b{batch_index:05d}"
+        yield chunk[-1].frame_index, make_batch(batch_id, encoded)
+
+
+def wire_batches(
+    run: SimRun, frames_per_batch: int = 2, depth_encoding: str = "png16"
+) -> list[tuple[int, dict[str, Any]]]:
+    """A whole run's wire batches, each with the index of its last frame (the evaluation's)."""
+    return list(
+        iter_wire_batches(run.scenario, run.seed, run.frames, frames_per_batch, depth_encoding)
+    )
 
 
 RUN_FORMAT = 1

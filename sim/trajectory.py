@@ -37,14 +37,24 @@ def _along_polyline(
 
 
 def _orbit_eye(spec: TrajectorySpec, eye_height: float, angle: float) -> np.ndarray:
-    """Eye position on the orbit circle."""
+    """Eye position on the orbit ellipse, raised or lowered by its bob."""
+    height = eye_height
+    if spec.bob_amplitude > 0:
+        height += spec.bob_amplitude * math.sin(spec.bob_cycles * angle)
     return np.array(
         [
-            spec.center[0] + spec.radius * math.cos(angle),
-            spec.center[1] + spec.radius * math.sin(angle),
-            eye_height,
+            spec.center[0] + spec.radii[0] * math.cos(angle),
+            spec.center[1] + spec.radii[1] * math.sin(angle),
+            height,
         ]
     )
+
+
+def _orbit_target(spec: TrajectorySpec, frame_index: int, frames: int) -> np.ndarray:
+    """The gaze target of a frame: a lap's equal blocks of frames visit the targets in turn."""
+    # Integer arithmetic, so a block boundary never shifts by a frame through rounding.
+    block = frame_index * spec.loops * spec.look_blocks // frames % spec.look_blocks
+    return np.asarray(spec.look_at[block % len(spec.look_at)], dtype=np.float64)
 
 
 def trajectory_poses(spec: TrajectorySpec, frames: int, eye_height: float) -> list[np.ndarray]:
@@ -58,7 +68,8 @@ def trajectory_poses(spec: TrajectorySpec, frames: int, eye_height: float) -> li
             eye, target = _along_polyline(eyes, targets, lap_fraction)
         else:
             angle = spec.start_angle + 2.0 * math.pi * lap_fraction
-            eye, target = _orbit_eye(spec, eye_height, angle), np.asarray(spec.look_at)
+            eye = _orbit_eye(spec, eye_height, angle)
+            target = _orbit_target(spec, frame_index, frames)
         poses.append(look_at(eye, target))
     return poses
 
@@ -75,7 +86,7 @@ def path_samples(spec: TrajectorySpec, eye_height: float) -> list[tuple[str, np.
             name = f"the segment from points[{index}] to points[{(index + 1) % count}]"
             samples.extend((name, start + (end - start) * k / steps) for k in range(steps + 1))
     else:
-        steps = max(int(2.0 * math.pi * spec.radius / PATH_SAMPLE_SPACING_M), 8)
+        steps = max(int(2.0 * math.pi * max(spec.radii) / PATH_SAMPLE_SPACING_M), 8)
         samples.extend(
             ("the orbit", _orbit_eye(spec, eye_height, 2.0 * math.pi * k / steps))
             for k in range(steps)

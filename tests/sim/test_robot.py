@@ -13,7 +13,10 @@ from PIL import Image
 
 import sim.robot as robot
 from api_schema import BatchIn
+from sim import DEMO_SCENARIO
 from sim.detector import FIXTURE_VOCABULARY
+from sim.scenario import load_scenario
+from sim.stream import simulate, wire_batches
 
 SCENE_ID = "scene-42"
 
@@ -58,7 +61,10 @@ def test_run_creates_a_scene_and_posts_every_frame_in_batches() -> None:
     batch_ids = [batch["batch_id"] for batch in service.batches]
     assert len(set(batch_ids)) == 3
     frames = [frame for batch in service.batches for frame in batch["frames"]]
-    assert [frame["frame_id"] for frame in frames] == [f"f{index:06d}" for index in range(5)]
+    # The stream's ids: scenario name, run seed (7 by default) and frame index.
+    assert [frame["frame_id"] for frame in frames] == [
+        f"demo-s7-f{index:05d}" for index in range(5)
+    ]
     assert [frame["timestamp"] for frame in frames] == pytest.approx([0.0, 0.1, 0.2, 0.3, 0.4])
     first = frames[0]
     depth = np.array(Image.open(io.BytesIO(base64.b64decode(first["depth"]["data"]))))
@@ -90,6 +96,14 @@ def test_same_seed_sends_identical_batches() -> None:
             robot.run_robot("", frames=2, frames_per_batch=2, seed=3, progress=False, client=client)
         runs.append(service.batches)
     assert runs[0] == runs[1]
+
+
+def test_the_robot_posts_the_batches_the_evaluation_reads() -> None:
+    service = FakeService()
+    with client_for(service) as client:
+        robot.run_robot("", frames=6, frames_per_batch=3, seed=5, progress=False, client=client)
+    run = simulate(load_scenario(DEMO_SCENARIO, frames=6), seed=5)
+    assert service.batches == [batch for _, batch in wire_batches(run, frames_per_batch=3)]
 
 
 def test_connection_errors_are_retried(monkeypatch: pytest.MonkeyPatch) -> None:

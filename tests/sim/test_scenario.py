@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
+from sim import DEMO_SCENARIO
 from sim.camera import CameraModel
 from sim.coverage import coverage
 from sim.recorded import composite, load_recorded
@@ -132,6 +133,46 @@ def test_orbit_poses_circle_the_center_and_look_at_the_target() -> None:
         assert math.dist(pose[:2, 3], (6.0, 3.0)) == pytest.approx(1.0)
         toward = np.array([5.8, 1.2, 0.72]) - pose[:3, 3]
         assert pose[:3, 2] @ toward / np.linalg.norm(toward) == pytest.approx(1.0)
+
+
+def test_an_elliptic_orbit_bobs_and_looks_at_its_targets_in_blocks() -> None:
+    scenario = load_scenario(DEMO_SCENARIO)
+    assert scenario.trajectory is not None
+    poses = trajectory_poses(scenario.trajectory, 20, scenario.camera.eye_height)
+    eyes = np.array([pose[:3, 3] for pose in poses])
+    # On the ellipse (x - 3.0)^2 / 2.2^2 + (y - 2.3)^2 / 1.5^2 = 1, starting due north.
+    ellipse = ((eyes[:, 0] - 3.0) / 2.2) ** 2 + ((eyes[:, 1] - 2.3) / 1.5) ** 2
+    assert ellipse == pytest.approx(np.ones(20))
+    assert eyes[0, :2] == pytest.approx([3.0, 3.8])
+    angles = np.pi / 2 + 2 * np.pi * np.arange(20) / 20
+    assert eyes[:, 2] == pytest.approx(1.3 + 0.1 * np.sin(3 * angles))
+    # Ten blocks of two frames each, alternating between the table top and the counter top.
+    targets = [(3.0, 2.3, 0.75), (3.0, 4.6, 0.9)]
+    for index, pose in enumerate(poses):
+        toward = np.array(targets[index // 2 % 2]) - pose[:3, 3]
+        assert pose[:3, 2] @ toward / np.linalg.norm(toward) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize(
+    ("trajectory", "field"),
+    [
+        ({"radius": [2.2]}, r"trajectory\.radius: expected a list of 2"),
+        ({"radius": [2.2, 0]}, r"trajectory\.radius: every entry must be > 0"),
+        ({"look_at": [[3.0, 2.3, 0.75], [3.0, 4.6]]}, r"trajectory\.look_at\[1\]"),
+        ({"look_blocks": 0}, r"trajectory\.look_blocks"),
+        ({"bob": {"cycles": None}}, r"trajectory\.bob\.cycles: required"),
+        ({"bob": {"amplitude": 0.1, "cycles": 3, "phase": 0}}, r"trajectory\.bob\.phase: unknown"),
+        ({"bob": {"amplitude": 1.5, "cycles": 3}}, r"camera height .* outside the room"),
+    ],
+)
+def test_a_bad_orbit_field_gives_an_error_naming_it(trajectory: dict[str, Any], field: str) -> None:
+    with pytest.raises(ScenarioError, match=field):
+        load_scenario(DEMO_SCENARIO, {"trajectory": trajectory})
+
+
+def test_orbit_only_fields_are_unknown_on_waypoints() -> None:
+    with pytest.raises(ScenarioError, match=r"trajectory\.bob: unknown field"):
+        load_scenario(HOTEL, {"trajectory": {"bob": {"amplitude": 0.1, "cycles": 3}}})
 
 
 def test_shortening_keeps_the_event_order_and_relative_times() -> None:
