@@ -16,7 +16,7 @@ $(VENV)/.installed: pyproject.toml
 	@touch $@
 
 demo: setup  ## the service on SQLite, fed live by the simulated robot
-	$(BIN)/python -m bench.demo_service
+	$(BIN)/python -m sim.demo_service
 
 serve: setup  ## the API with its in-process worker
 	$(BIN)/pbdag serve
@@ -43,8 +43,8 @@ bench: setup  ## the performance benchmarks (figures printed and written to benc
 	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 
 eval: setup  ## the paper's protocols on every shipped scenario, seeds 7 17 27 (about 20 minutes)
-	$(BIN)/pbdag eval dynamic --out bench/results/dynamic
-	$(BIN)/pbdag eval fixtures --out bench/results/fixtures
+	$(BIN)/pbdag eval dynamic --out evaluation/results/dynamic
+	$(BIN)/pbdag eval fixtures --out evaluation/results/fixtures
 
 clean:
-	rm -rf $(VENV) data bench/results .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) data bench/results evaluation/results .pytest_cache .mypy_cache .ruff_cache

@@ -1,1 +1,1 @@
-"""Benchmarks and the simulated robot that drives the service over HTTP."""
+"""Performance benchmarks: render + detect, decide + evolve, and the store's append and as_of."""

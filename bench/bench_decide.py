@@ -10,15 +10,15 @@ from dataclasses import replace
 import numpy as np
 
 from bench.perf_common import write_results
-from bench.sim.camera import CameraModel, look_at
-from bench.sim.detector import detect
-from bench.sim.render import add_kinect_noise, render
-from bench.sim.world import Box, World, object_on
 from core.decide import decide
 from core.events import ObjectAdded, Observation
 from core.evolve import fold
 from core.observation import Batch, Detection, Frame, Intrinsics
 from core.state import SceneState
+from sim.camera import CameraModel, look_at
+from sim.detector import detect
+from sim.render import add_kinect_noise, render
+from sim.world import Box, World, object_on
 
 LABELS = ("mug", "book", "bowl", "bottle", "remote", "cup", "plate", "phone", "box", "can")
 

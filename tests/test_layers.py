@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
+import networkx as nx
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -12,6 +13,8 @@ FORBIDDEN = {
     "core": {
         "service",
         "api_schema",
+        "sim",
+        "evaluation",
         "bench",
         "tests",
         "sqlalchemy",
@@ -21,10 +24,16 @@ FORBIDDEN = {
         "alembic",
         "psycopg",
     },
-    "api_schema": {"core", "service", "bench", "tests", "sqlalchemy"},
-    "service": {"bench", "tests"},
-    "migrations": {"bench", "tests"},
+    "api_schema": {"core", "service", "sim", "evaluation", "bench", "tests", "sqlalchemy"},
+    "service": {"sim", "evaluation", "bench", "tests"},
+    "migrations": {"sim", "evaluation", "bench", "tests"},
+    # The simulator produces streams and ground truth; the evaluation consumes them, never the
+    # other way round, and neither depends on the benchmarks.
+    "sim": {"evaluation", "bench", "tests"},
+    "evaluation": {"bench", "tests"},
 }
+# Packages whose module graph must stay acyclic (checked module by module, not just by package).
+ACYCLIC = ("sim", "evaluation")
 
 
 def imported_roots(path: Path) -> set[str]:
@@ -53,3 +62,71 @@ def test_the_checker_sees_a_violation(tmp_path):
     module = tmp_path / "bad.py"
     module.write_text("import sqlalchemy\nfrom service.app import create_app\n")
     assert imported_roots(module) >= {"sqlalchemy", "service"}
+
+
+def module_name(path: Path, root: Path) -> str:
+    """Dotted module name of a file under `root` (a package's __init__ is the package)."""
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def imported_modules(path: Path, name: str) -> set[str]:
+    """Dotted names a module imports, relative imports resolved, each `from X import y` also as X.y.
+
+    Every import counts, including those under TYPE_CHECKING and inside functions: a cycle hidden
+    there is still a cycle in the design.
+    """
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            found.add(base)
+            found |= {f"{base}.{alias.name}" for alias in node.names}
+    return found
+
+
+def import_graph(root: Path, packages: tuple[str, ...]) -> nx.DiGraph:
+    """Module -> imported module edges among the modules of `packages` under `root`."""
+    files = {
+        module_name(path, root): path
+        for package in packages
+        for path in (root / package).rglob("*.py")
+    }
+    graph = nx.DiGraph()
+    graph.add_nodes_from(files)
+    for name, path in files.items():
+        graph.add_edges_from(
+            (name, target)
+            for target in imported_modules(path, name)
+            if target in files and target != name
+        )
+    return graph
+
+
+def test_sim_and_evaluation_modules_import_each_other_without_a_cycle():
+    graph = import_graph(ROOT, ACYCLIC)
+    assert graph.number_of_edges() > 0, "the checker found no imports at all"
+    try:
+        cycle = nx.find_cycle(graph)
+    except nx.NetworkXNoCycle:
+        return
+    pytest.fail("import cycle: " + " -> ".join(edge[0] for edge in cycle) + f" -> {cycle[-1][1]}")
+
+
+def test_the_cycle_checker_sees_a_cycle_hidden_under_type_checking(tmp_path):
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "a.py").write_text("from pkg.b import helper\n")
+    (package / "b.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from . import a\n"
+    )
+    graph = import_graph(tmp_path, ("pkg",))
+    assert {("pkg.a", "pkg.b"), ("pkg.b", "pkg.a")} <= set(graph.edges)
+    assert {edge[0] for edge in nx.find_cycle(graph)} == {"pkg.a", "pkg.b"}

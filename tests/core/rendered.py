@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.sim.camera import CameraModel, look_at
-from bench.sim.render import render
-from bench.sim.world import Box, World, object_on
 from core.observation import Batch, Detection, Frame, Intrinsics
+from sim.camera import CameraModel, look_at
+from sim.render import render
+from sim.world import Box, World, object_on
 
 CAMERA = CameraModel(width=320, height=240, fx=200.0, fy=200.0, cx=159.5, cy=119.5)
 INTRINSICS = Intrinsics(CAMERA.width, CAMERA.height, CAMERA.fx, CAMERA.fy, CAMERA.cx, CAMERA.cy)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import pytest
 
-from bench.sim.world import object_on
 from core.baseline import decide_freeze, decide_load, package_sha256
 from core.decide import decide
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
@@ -12,6 +11,7 @@ from core.evolve import fold
 from core.inspection import decide_inspection
 from core.state import SceneState
 from core.verification import decide_verdict
+from sim.world import object_on
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame
 
 AMBIGUOUS = {"table": {"table": 0.50, "desk": 0.48}, "counter": {"counter": 0.6, "table": 0.3}}

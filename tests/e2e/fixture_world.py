@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.sim.camera import look_at
-from bench.sim.detector import detect, detect_fixtures
-from bench.sim.render import render
-from bench.sim.wire import make_batch, make_frame
-from bench.sim.world import World, object_on
+from sim.camera import look_at
+from sim.detector import detect, detect_fixtures
+from sim.render import render
+from sim.wire import make_batch, make_frame
+from sim.world import World, object_on
 from tests.core.rendered import CAMERA, COUNTER, COUNTER_VIEWS, TABLE, TABLE_VIEWS
 
 MUG = object_on(TABLE, "mug", "mug", (0.1, 0.1, 0.1), at=(0.3, 0.0))

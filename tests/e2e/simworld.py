@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from bench.sim.camera import CameraModel, look_at
-from bench.sim.detector import detect
-from bench.sim.render import add_kinect_noise, render
-from bench.sim.wire import make_batch, make_frame
-from bench.sim.world import Box, World, object_on
+from sim.camera import CameraModel, look_at
+from sim.detector import detect
+from sim.render import add_kinect_noise, render
+from sim.wire import make_batch, make_frame
+from sim.world import Box, World, object_on
 
 CAMERA = CameraModel(width=320, height=240, fx=262.5, fy=262.5, cx=159.5, cy=119.5)
 TABLE = Box("table", "table", (3.0, 2.5, 0.375), (1.2, 0.8, 0.75), kind="fixture")

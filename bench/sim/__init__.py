@@ -1,1 +1,0 @@
-"""A minimal raycast world simulator: boxes in a room, a pinhole depth camera, a mask detector."""

@@ -1,0 +1,154 @@
+"""A simulated robot: walks a scenario (the demo's by default) and posts its batches to the HTTP API.
+
+The batches are the stream's (`sim.stream`), the same the evaluation reads: this module only
+speaks HTTP.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import httpx
+from tqdm import tqdm
+
+from sim import DEMO_SCENARIO
+from sim.scenario import load_scenario
+from sim.stream import iter_frames, iter_wire_batches
+
+CONNECT_ATTEMPTS = 6  # with doubling from 0.2 s: about 6 s for the service to come up
+FIRST_BACKOFF_SECONDS = 0.2
+
+
+def _with_retries(
+    send: Callable[[], httpx.Response],
+    retry_on: tuple[type[Exception], ...],
+) -> httpx.Response:
+    """Call `send`, retrying with doubling backoff while the service is unreachable."""
+    backoff = FIRST_BACKOFF_SECONDS
+    for attempt in range(CONNECT_ATTEMPTS):
+        try:
+            return send()
+        except retry_on:
+            if attempt == CONNECT_ATTEMPTS - 1:
+                raise
+            time.sleep(backoff)
+            backoff *= 2
+    raise AssertionError("unreachable")  # the loop either returns or re-raises
+
+
+def _expect(response: httpx.Response, status: int, what: str) -> httpx.Response:
+    """The response if it has the expected status, else a RuntimeError naming the request."""
+    if response.status_code != status:
+        raise RuntimeError(
+            f"{what}: expected HTTP {status}, got {response.status_code}: {response.text[:500]}"
+        )
+    return response
+
+
+def create_scene(client: httpx.Client, base_url: str, scene_name: str) -> str:
+    """POST /v1/scenes and return the new scene's id."""
+    # Only connection failures are retried: the request never reached the service, so a
+    # retry cannot create a second scene.
+    response = _with_retries(
+        lambda: client.post(f"{base_url}/v1/scenes", json={"name": scene_name}),
+        retry_on=(httpx.ConnectError, httpx.ConnectTimeout),
+    )
+    return str(_expect(response, 201, "create scene").json()["id"])
+
+
+def post_batch(client: httpx.Client, base_url: str, scene_id: str, batch: dict[str, Any]) -> None:
+    """POST one batch; any transport error is retried since batch_id makes the call idempotent."""
+    response = _with_retries(
+        lambda: client.post(f"{base_url}/v1/scenes/{scene_id}/batches", json=batch),
+        retry_on=(httpx.TransportError,),
+    )
+    _expect(response, 202, f"post batch {batch['batch_id']}")
+
+
+def run_robot(
+    base_url: str,
+    *,
+    scenario_path: str | Path = DEMO_SCENARIO,
+    scene_name: str = "sim-demo",
+    frames: int | None = None,
+    frames_per_batch: int = 2,
+    seed: int = 7,
+    pace_seconds: float = 0.0,
+    progress: bool = True,
+    client: httpx.Client | None = None,
+) -> str:
+    """Create a scene, stream the scenario into it batch by batch, and return the scene id.
+
+    `frames` shortens (or stretches) the scenario with its story intact (`load_scenario`).
+    """
+    if frames_per_batch < 1:
+        raise ValueError("frames_per_batch must be at least 1")
+    scenario = load_scenario(scenario_path, frames=frames)
+    base_url = base_url.rstrip("/")
+    own_client = client is None
+    http = client if client is not None else httpx.Client(timeout=30.0)
+    try:
+        scene_id = create_scene(http, base_url, scene_name)
+        n_batches = -(-scenario.frames // frames_per_batch)
+        batches = iter_wire_batches(scenario, seed, iter_frames(scenario, seed), frames_per_batch)
+        progress_bar = tqdm(
+            total=scenario.frames,
+            desc=f"scene {scene_id}",
+            unit="frame",
+            file=sys.stderr,
+            disable=not progress,
+        )
+        with progress_bar:
+            for batch_index, (_, batch) in enumerate(batches):
+                post_batch(http, base_url, scene_id, batch)
+                progress_bar.set_postfix(batch=f"{batch_index + 1}/{n_batches}", refresh=False)
+                progress_bar.update(len(batch["frames"]))
+                if pace_seconds > 0:
+                    time.sleep(pace_seconds)
+        return scene_id
+    finally:
+        if own_client:
+            http.close()
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Command line: python -m sim.robot --url http://localhost:8000."""
+    parser = argparse.ArgumentParser(description="Stream a simulated robot run into PBD-AG.")
+    parser.add_argument("--url", default="http://127.0.0.1:8000", help="service base URL")
+    parser.add_argument(
+        "--scenario", type=Path, default=DEMO_SCENARIO, help="scenario file (default: the demo)"
+    )
+    parser.add_argument("--frames", type=int, default=None, help="shorten the scenario to N frames")
+    parser.add_argument("--frames-per-batch", type=int, default=2)
+    parser.add_argument("--seed", type=int, default=7)
+    parser.add_argument("--pace", type=float, default=0.0, help="seconds to wait between batches")
+    parser.add_argument("--name", default="sim-demo", help="scene name")
+    parser.add_argument(
+        "--token",
+        default=os.environ.get("PBDAG_TOKEN"),
+        help="bearer token with the write scope (default: $PBDAG_TOKEN)",
+    )
+    args = parser.parse_args(argv)
+    headers = {"Authorization": f"Bearer {args.token}"} if args.token else {}
+    with httpx.Client(timeout=30.0, headers=headers) as client:
+        scene_id = run_robot(
+            args.url,
+            scenario_path=args.scenario,
+            scene_name=args.name,
+            frames=args.frames,
+            frames_per_batch=args.frames_per_batch,
+            seed=args.seed,
+            pace_seconds=args.pace,
+            client=client,
+        )
+    print(scene_id)
+
+
+if __name__ == "__main__":
+    main()

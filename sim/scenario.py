@@ -1,0 +1,259 @@
+"""Scenario files: a YAML description of a room, its furniture, objects, camera walk and events."""
+
+from __future__ import annotations
+
+import copy
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from sim.scenario_checks import check_events, check_layout, check_trajectory
+from sim.scenario_fields import ScenarioError, Section, positive, sequence, vector
+from sim.scenario_parts import (
+    CameraSpec,
+    EventSpec,
+    FixtureSpec,
+    ObjectSpec,
+    OccluderSpec,
+    WallSpec,
+    parse_camera,
+    parse_event,
+    parse_fixture,
+    parse_object,
+    parse_occluder,
+    parse_wall,
+)
+from sim.scenario_settings import (
+    BackgroundSpec,
+    DetectorSpec,
+    TrajectorySpec,
+    parse_background,
+    parse_detector,
+    parse_trajectory,
+)
+from sim.scenario_spec import Scenario
+
+__all__ = [
+    "REPO_ROOT",
+    "BackgroundSpec",
+    "CameraSpec",
+    "DetectorSpec",
+    "EventSpec",
+    "FixtureSpec",
+    "ObjectSpec",
+    "OccluderSpec",
+    "Scenario",
+    "ScenarioError",
+    "TrajectorySpec",
+    "WallSpec",
+    "load_scenario",
+    "scenario_from_dict",
+]
+
+# Recorded backgrounds name their data folder relative to the repository root (the folder
+# holding `sim/`), so one spelling works whichever folder the scenario file sits in.
+REPO_ROOT = Path(__file__).resolve().parent.parent
+NAME_PATTERN = re.compile(r"^[A-Za-z0-9._-]+$")  # names end up inside wire batch ids
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader that refuses duplicate keys and reads only true/false as booleans."""
+
+
+# YAML 1.1 reads a bare `on` (our support field) as the boolean true; keep YAML 1.2 booleans.
+_UniqueKeyLoader.yaml_implicit_resolvers = {
+    first: [(tag, regexp) for tag, regexp in resolvers if tag != "tag:yaml.org,2002:bool"]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+_UniqueKeyLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:bool",
+    re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"),
+    list("tTfF"),
+)
+
+
+def _construct_unique_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode) -> dict[Any, Any]:
+    """Build a mapping, failing on a repeated key with its line number."""
+    keys: set[Any] = set()
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node)
+        if key in keys:
+            line = key_node.start_mark.line + 1
+            raise ScenarioError(f"line {line}: duplicate key {key!r}")
+        keys.add(key)
+    return loader.construct_mapping(node)
+
+
+_UniqueKeyLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_unique_mapping
+)
+
+
+def _merge(base: dict[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
+    """`base` with `overrides` merged in: mappings merge, None deletes, anything else replaces."""
+    merged = copy.deepcopy(base)
+    for key, value in overrides.items():
+        if value is None:
+            merged.pop(key, None)
+        elif isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+            merged[key] = _merge(dict(merged[key]), value)
+        else:
+            merged[key] = copy.deepcopy(value)
+    return merged
+
+
+def load_scenario(
+    path: str | Path, overrides: Mapping[str, Any] | None = None, *, frames: int | None = None
+) -> Scenario:
+    """Read, merge `overrides` into, optionally shorten to `frames`, and validate a scenario file.
+
+    `frames` (or an override {"frames": n}) keeps the story: event frames scale by n / the
+    file's frames, so a 20-frame test run still sees every event (the laps squeeze the same
+    way); with a recorded background it keeps the first n selected frames.
+    """
+    path = Path(path)
+    try:
+        raw = yaml.load(path.read_text(encoding="utf-8"), Loader=_UniqueKeyLoader)
+    except yaml.YAMLError as error:
+        raise ScenarioError(f"{path}: not valid YAML: {error}") from error
+    except ScenarioError as error:
+        raise ScenarioError(f"{path}: {error}") from error
+    if not isinstance(raw, dict):
+        raise ScenarioError(f"{path}: the file must hold a mapping of scenario fields")
+    overrides = dict(overrides or {})
+    # A frames override means "the same story, shorter (or longer)": events scale with it.
+    frames = overrides.pop("frames", None) if frames is None else frames
+    merged = _merge(raw, overrides)
+    if frames is not None:
+        merged = _shortened(merged, frames)
+    return scenario_from_dict(merged, source=path)
+
+
+def _shortened(raw: dict[str, Any], frames: int) -> dict[str, Any]:
+    """The scenario squeezed into `frames` frames, events keeping their relative times."""
+    shortened = copy.deepcopy(raw)
+    background = shortened.get("background")
+    if isinstance(background, dict):
+        # A recording is shortened by keeping its first `frames` selected frames.
+        try:
+            start, stop, step = (int(value) for value in background["frames"])
+            original = len(range(start, stop, step))
+        except (KeyError, TypeError, ValueError) as error:
+            raise ScenarioError(
+                "background.frames: shortening needs [start, stop, step]"
+            ) from error
+        background["frames"] = [start, start + min(frames, original) * step, step]
+        shortened.pop("frames", None)
+    else:
+        original = raw.get("frames")
+        if not isinstance(original, int) or isinstance(original, bool) or original < 1:
+            raise ScenarioError("frames: shortening needs the file's own positive integer frames")
+        shortened["frames"] = frames
+    for event in shortened.get("events") or []:
+        if isinstance(event, dict) and isinstance(event.get("frame"), int):
+            event["frame"] = event["frame"] * frames // original
+    return shortened
+
+
+def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Scenario:
+    """Validate an already-parsed scenario mapping."""
+    top = Section(raw, "")
+    name = top.get("name", _name)
+    seed = top.get(
+        "seed", lambda value, where: int(positive(value, where, integer=True, zero=True))
+    )
+    camera = top.get("camera", parse_camera)
+    background = top.get(
+        "background", lambda value, where: parse_background(value, where, REPO_ROOT), None
+    )
+    room_size = top.get("room", _room, None)
+    if room_size is None and background is None:
+        raise ScenarioError("room: required (only a recorded background may leave it out)")
+    walls = tuple(top.get("walls", lambda value, where: sequence(value, where, parse_wall), []))
+    fixtures = tuple(
+        top.get("fixtures", lambda value, where: sequence(value, where, parse_fixture))
+    )
+    occluders = tuple(
+        top.get("occluders", lambda value, where: sequence(value, where, parse_occluder), [])
+    )
+    listed = tuple(
+        top.get("objects", lambda value, where: sequence(value, where, parse_object), [])
+    )
+    trajectory = top.get("trajectory", parse_trajectory, None)
+    events_and_new = top.get("events", lambda value, where: sequence(value, where, parse_event), [])
+    detector = top.get("detector", parse_detector, None) or parse_detector({}, "detector")
+    frames = top.get("frames", lambda value, where: int(positive(value, where, integer=True)), None)
+    frame_period = top.get("frame_period", positive, 0.1)
+    top.finish()
+
+    if background is not None:
+        selected = len(range(*background.frames))
+        if frames is not None and frames != selected:
+            raise ScenarioError(
+                f"frames: {frames} does not match the {selected} frames background.frames selects"
+            )
+        frames, trajectory = selected, None
+    else:
+        if frames is None:
+            raise ScenarioError("frames: required")
+        if trajectory is None:
+            raise ScenarioError("trajectory: required without a recorded background")
+
+    listed_ids = {spec.id for spec in listed}
+    for index, (event, defined) in enumerate(events_and_new):
+        if defined is not None and defined.id in listed_ids:
+            raise ScenarioError(
+                f"events[{index}].label: object {event.object!r} is already defined in objects"
+            )
+    file_order = tuple(event for event, _ in events_and_new)
+    event_only = tuple(defined for _, defined in events_and_new if defined is not None)
+    objects = listed + event_only
+    check_layout(room_size, walls, fixtures, occluders, objects, len(listed))
+    check_events(file_order, objects, fixtures, frames)
+    fixture_ids = {spec.id for spec in fixtures}
+    for fixture_id in (detector.fixtures.ambiguity or {}) if detector.fixtures else {}:
+        if fixture_id not in fixture_ids:
+            raise ScenarioError(f"detector.fixtures.ambiguity.{fixture_id}: unknown fixture")
+    # A stable sort keeps same-frame events in file order.
+    events = tuple(sorted(file_order, key=lambda event: event.frame))
+    scenario = Scenario(
+        name=name,
+        seed=seed,
+        frames=frames,
+        camera=camera,
+        room_size=room_size or (0.0, 0.0, 0.0),
+        walls=walls,
+        fixtures=fixtures,
+        occluders=occluders,
+        objects=objects,
+        trajectory=trajectory,
+        events=events,
+        detector=detector,
+        background=background,
+        frame_period=frame_period,
+        source=source,
+        raw=copy.deepcopy(dict(raw)),
+    )
+    if trajectory is not None:
+        check_trajectory(scenario)
+    return scenario
+
+
+def _name(value: Any, where: str) -> str:
+    """A scenario name usable inside batch ids."""
+    if not isinstance(value, str) or not NAME_PATTERN.match(value):
+        raise ScenarioError(
+            f"{where}: must be a non-empty string of letters, digits, '.', '_', '-'"
+        )
+    return value
+
+
+def _room(value: Any, where: str) -> tuple[float, float, float]:
+    """The room's x and y extents and height."""
+    section = Section(value, where)
+    size = section.get("size", lambda item, at: vector(item, at, 3, positive_only=True))
+    section.finish()
+    return size

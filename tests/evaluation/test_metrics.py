@@ -1,0 +1,295 @@
+"""Evaluation metrics on hand-built frames whose expected scores are worked out by hand."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from evaluation.metrics import (
+    event_recall,
+    false_absence,
+    fixture_scores,
+    global_assignment,
+    identity_metrics,
+    mean_std,
+    presence_f1,
+)
+from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
+from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject, Vec3
+
+ORIGIN: Vec3 = (0.0, 0.0, 0.0)
+FAR: Vec3 = (3.0, 0.0, 0.0)
+
+
+def truth_object(object_id: str, center: Vec3 = ORIGIN, present: bool = True) -> TruthObject:
+    """A ground-truth object with the fields the metrics ignore filled in."""
+    return TruthObject(object_id, "mug", center, present, parent=None, visible_pixels=500)
+
+
+def node(
+    track_id: str, center: Vec3 = ORIGIN, kind: str = "object", label: str = "mug"
+) -> PredictedNode:
+    """A published graph node."""
+    return PredictedNode(track_id, label, center, parent=None, kind=kind)
+
+
+def truth_frames(*frames: list[TruthObject]) -> list[FrameTruth]:
+    """Frames of ground truth numbered from 0."""
+    return [FrameTruth(index, tuple(objects)) for index, objects in enumerate(frames)]
+
+
+def prediction_frames(*frames: list[PredictedNode]) -> list[FramePrediction]:
+    """Published graphs numbered from 0."""
+    return [FramePrediction(index, tuple(nodes)) for index, nodes in enumerate(frames)]
+
+
+def test_perfect_tracker_scores_one_and_tolerates_an_empty_frame() -> None:
+    # a at the origin and b at 3 m, each followed within 0.1 m by its own track; frame 2 is
+    # empty on both sides. IDTP = 6, IDFP = IDFN = 0 -> idf1 = 1, no switch, 4 frames.
+    truth = truth_frames(
+        [truth_object("a"), truth_object("b", FAR)],
+        [truth_object("a"), truth_object("b", FAR)],
+        [],
+        [truth_object("a"), truth_object("b", FAR)],
+    )
+    near_a, near_b = (0.1, 0.0, 0.0), (3.0, 0.1, 0.0)
+    predictions = prediction_frames(
+        [node("t1", near_a), node("t2", near_b)],
+        [node("t1", near_a), node("t2", near_b)],
+        [],
+        [node("t1", near_a), node("t2", near_b)],
+    )
+    scores = identity_metrics(truth, predictions)
+    assert (scores.idf1, scores.idp, scores.idr) == (1.0, 1.0, 1.0)
+    assert scores.id_switches == 0
+    assert scores.num_frames == 4
+    assert global_assignment(truth, predictions) == {"a": "t1", "b": "t2"}
+
+
+def test_identity_change_midway_is_one_switch() -> None:
+    # a is present in 5 frames; track t1 follows it in frames 0-2, then t2 takes over in
+    # frames 3-4 (one switch). A ghost g, 3 m away, is published in frame 0 only.
+    # Global matching a -> t1: IDTP = 3, IDFN = 5 - 3 = 2, IDFP = 6 published - 3 = 3.
+    # idp = 3/6, idr = 3/5, idf1 = 2*3 / (5 + 6) = 6/11.
+    truth = truth_frames(*([truth_object("a")] for _ in range(5)))
+    predictions = prediction_frames(
+        [node("t1"), node("g", FAR)],
+        [node("t1")],
+        [node("t1")],
+        [node("t2")],
+        [node("t2")],
+    )
+    scores = identity_metrics(truth, predictions)
+    assert scores.id_switches == 1
+    assert scores.idp == pytest.approx(0.5)
+    assert scores.idr == pytest.approx(0.6)
+    assert scores.idf1 == pytest.approx(6 / 11)
+    assert global_assignment(truth, predictions) == {"a": "t1"}
+
+
+def test_track_beyond_half_a_metre_never_matches_but_one_at_half_a_metre_does() -> None:
+    # 0.6 m is outside the 0.5 m gate in every frame: no identity true positive at all.
+    truth = truth_frames([truth_object("a")], [truth_object("a")])
+    away = prediction_frames([node("t1", (0.6, 0.0, 0.0))], [node("t1", (0.6, 0.0, 0.0))])
+    scores = identity_metrics(truth, away)
+    assert (scores.idf1, scores.idp, scores.idr, scores.id_switches) == (0.0, 0.0, 0.0, 0)
+    assert global_assignment(truth, away) == {}
+    # Exactly 0.5 m (squared 0.25, exact in binary) is inside: the gate is inclusive.
+    at_gate = prediction_frames([node("t1", (0.5, 0.0, 0.0))], [node("t1", (0.5, 0.0, 0.0))])
+    assert identity_metrics(truth, at_gate).idf1 == 1.0
+    assert global_assignment(truth, at_gate) == {"a": "t1"}
+
+
+def test_no_ground_truth_scores_zero() -> None:
+    # Nothing is present (b is listed but absent), yet a track is published.
+    truth = truth_frames([], [truth_object("b", present=False)])
+    predictions = prediction_frames([node("t1")], [node("t1")])
+    scores = identity_metrics(truth, predictions)
+    assert (scores.idf1, scores.id_switches, scores.num_frames) == (0.0, 0, 2)
+
+
+def test_nothing_published_scores_zero_not_nan() -> None:
+    # a present in 2 frames, no track: IDTP = 0, IDFN = 2, IDFP = 0; idp is 0/0 in motmetrics.
+    truth = truth_frames([truth_object("a")], [truth_object("a")])
+    scores = identity_metrics(truth, prediction_frames([], []))
+    assert (scores.idf1, scores.idp, scores.idr, scores.id_switches) == (0.0, 0.0, 0.0, 0)
+
+
+def test_global_assignment_maximizes_total_co_occurrence_not_greedy() -> None:
+    # a at the origin, b at 3 m. Co-occurrences: a-t1 = 3 (frames 0-2), a-t2 = 2 (frames
+    # 0-1), b-t1 = 2 (frames 3-4), b-t2 = 0; the ghost g (1 m from b) never co-occurs.
+    # Greedy a -> t1 totals 3; Hungarian a -> t2, b -> t1 totals 4.
+    truth = truth_frames(*([truth_object("a"), truth_object("b", FAR)] for _ in range(5)))
+    predictions = prediction_frames(
+        [node("t1"), node("t2"), node("g", (4.0, 0.0, 0.0))],
+        [node("t1"), node("t2")],
+        [node("t1")],
+        [node("t1", FAR)],
+        [node("t1", FAR)],
+    )
+    assert global_assignment(truth, predictions) == {"a": "t2", "b": "t1"}
+
+
+def test_presence_counts_ghosts_missing_tracks_and_unassigned_objects() -> None:
+    # frame 0: a, b present; t1 (3 m off: distance is ignored), t2 and ghost g published, plus
+    #          a fixture node that object metrics ignore      -> TP 2, FP 1
+    # frame 1: a, b present; t1, t2, g published                -> TP 2, FP 1
+    # frame 2: a, b, c present (c unassigned); only t1         -> TP 1, FN 2 (b's t2, c)
+    # frame 3: a present, b listed absent; t1, t2 published     -> TP 1, FP 1 (t2)
+    # TP 6, FP 3, FN 2: precision 6/9, recall 6/8, f1 = 12 / (12 + 3 + 2) = 12/17.
+    a, b, c = truth_object("a"), truth_object("b", FAR), truth_object("c")
+    truth = truth_frames([a, b], [a, b], [a, b, c], [a, truth_object("b", FAR, present=False)])
+    predictions = prediction_frames(
+        [node("t1", FAR), node("t2", FAR), node("g"), node("f1", kind="fixture")],
+        [node("t1"), node("t2", FAR), node("g")],
+        [node("t1")],
+        [node("t1"), node("t2", FAR)],
+    )
+    scores = presence_f1(truth, predictions, {"a": "t1", "b": "t2"})
+    assert (scores.tp, scores.fp, scores.fn) == (6, 3, 2)
+    assert scores.precision == pytest.approx(6 / 9)
+    assert scores.recall == pytest.approx(6 / 8)
+    assert scores.f1 == pytest.approx(12 / 17)
+
+
+def test_event_recall_per_event_type() -> None:
+    assignment = {"mug": "t1", "book": "t2", "bowl": "t3", "cup": "t4"}
+    fixture_map = {"table": "F1", "counter": "F2"}
+    scheduled = [
+        ScheduledEvent(2, "appear", "mug", parent="table"),  # confirm t1 at 3: recalled
+        ScheduledEvent(4, "move", "book"),  # only t2's move at 3 (early), t1's at 5: not
+        ScheduledEvent(5, "disappear", "bowl"),  # remove t3 at 5, the same frame: recalled
+        ScheduledEvent(6, "transfer", "book", parent="counter"),  # reparent to F1: wrong
+        ScheduledEvent(6, "transfer", "mug", parent="counter"),  # reparent to F2 at 8: recalled
+        ScheduledEvent(6, "transfer", "cup", parent="shelf"),  # shelf unmatched: never
+        ScheduledEvent(1, "appear", "cup", parent="table"),  # add at 1, confirm at 10 >= n_frames
+        ScheduledEvent(3, "disappear", "vase"),  # vase has no track: never
+    ]
+    method_events = [
+        MethodEvent(1, "add", "t4", {}),
+        MethodEvent(2, "add", "t1", {}),
+        MethodEvent(3, "confirm", "t1", {}),
+        MethodEvent(3, "move", "t2", {}),
+        MethodEvent(5, "move", "t1", {}),
+        MethodEvent(5, "remove", "t3", {}),
+        MethodEvent(7, "reparent", "t2", {"new_parent": "F1"}),
+        MethodEvent(7, "reparent", "t4", {"new_parent": None}),
+        MethodEvent(8, "reparent", "t1", {"new_parent": "F2"}),
+        MethodEvent(10, "confirm", "t4", {}),
+    ]
+    result = event_recall(scheduled, method_events, assignment, fixture_map, n_frames=10)
+    assert [recalled for _, recalled in result.per_event] == [
+        True,
+        False,
+        True,
+        False,
+        True,
+        False,
+        False,
+        False,
+    ]
+    assert [event for event, _ in result.per_event] == scheduled
+    assert (result.recalled, result.total) == (3, 8)
+
+
+def test_false_absence_counts_only_after_first_publication() -> None:
+    # mug (t1): published at 1, 2, 4, missing at 3. Eligible at 2, 3, 4 (not at 1: acquisition
+    #           must be EARLIER) -> 3 eligible, 1 absent.
+    # book (t2): first published at 2, gone at 3, 4. Frames 0-2 not eligible -> 2 eligible,
+    #           2 absent.
+    # cup (t4): published at 0-2 while present at 0-2, absent from truth at 3-4 -> eligible at
+    #           1 and 2, never absent; the missing track at 3-4 does not count.
+    # bowl: no assigned track, never eligible although present throughout.
+    # eligible 3 + 2 + 2 = 7, absent 1 + 2 = 3, rate 3/7.
+    def objects(cup_present: bool) -> list[TruthObject]:
+        """The four objects of one frame."""
+        return [
+            truth_object("mug"),
+            truth_object("book", FAR),
+            truth_object("bowl", (0.0, 3.0, 0.0)),
+            truth_object("cup", (0.0, -3.0, 0.0), present=cup_present),
+        ]
+
+    truth = truth_frames(
+        objects(True), objects(True), objects(True), objects(False), objects(False)
+    )
+    predictions = prediction_frames(
+        [node("t4")],
+        [node("t1"), node("t4")],
+        [node("t1"), node("t2"), node("t4")],
+        [],
+        [node("t1")],
+    )
+    result = false_absence(truth, predictions, {"mug": "t1", "book": "t2", "cup": "t4"})
+    assert (result.absent, result.eligible) == (3, 7)
+    assert result.rate == pytest.approx(3 / 7)
+
+
+def test_false_absence_with_nothing_eligible_is_zero() -> None:
+    truth = truth_frames([truth_object("mug")], [truth_object("mug")])
+    predictions = prediction_frames([], [node("t1")])
+    result = false_absence(truth, predictions, {"mug": "t1"})
+    assert (result.rate, result.absent, result.eligible) == (0.0, 0, 0)
+
+
+def test_fixture_matching_by_class_and_distance() -> None:
+    truth = [
+        TruthFixture("T1", "table", (0.0, 0.0, 0.4), (1.0, 1.0, 0.8)),
+        TruthFixture("T2", "table", (3.0, 0.0, 0.4), (1.0, 1.0, 0.8)),
+        TruthFixture("C1", "counter", (0.0, 3.0, 0.45), (2.0, 0.6, 0.9)),
+        TruthFixture("S1", "shelf", (5.0, 5.0, 1.0), (1.0, 0.4, 2.0)),
+    ]
+    predicted = [
+        node("P1", (0.2, 0.0, 0.4), "fixture", "table"),  # T1 at 0.2 m: matched
+        node("P2", (0.5, 0.0, 0.4), "fixture", "table"),  # duplicate of T1 (taken), T2 2.5 m
+        node("P3", (0.0, 3.1, 0.45), "fixture", "table"),  # next to C1 but the wrong class
+        node("P4", (0.0, 4.2, 0.45), "fixture", "counter"),  # C1 at 1.2 m: outside 1.0 m
+        node("P5", (5.0, 5.6, 1.0), "fixture", "shelf"),  # S1 at 0.6 m: matched
+        node("P6", (9.0, 9.0, 0.5), "fixture", "sofa"),  # no sofa in truth
+        node("o1", (3.0, 0.0, 0.4), "object", "table"),  # an object node: ignored
+    ]
+    scores = fixture_scores(truth, predicted)
+    # matched 2 of 6 predicted fixtures and 4 true ones: precision 1/3, recall 1/2,
+    # f1 = 2 * (1/6) / (5/6) = 2/5; center error (0.2 + 0.6) / 2 = 0.4.
+    # Counts per class (pred - truth): table 3-2, counter 1-1, shelf 1-1, sofa 1-0 -> MAE 2/4.
+    assert scores.matched == 2
+    assert scores.fixture_map == {"T1": "P1", "S1": "P5"}
+    assert scores.precision == pytest.approx(1 / 3)
+    assert scores.recall == pytest.approx(1 / 2)
+    assert scores.f1 == pytest.approx(2 / 5)
+    assert scores.center_error == pytest.approx(0.4)
+    assert scores.count_mae == pytest.approx(0.5)
+
+
+def test_fixture_greedy_takes_the_closest_pair_first() -> None:
+    # P1 is 0.3 m from T1 and 0.1 m from T2; P2 is 0.5 m from T1 and 0.9 m from T2.
+    # Ascending distance: (T2, P1) 0.1 first, then (T1, P2) 0.5; (T1, P1) is skipped.
+    truth = [
+        TruthFixture("T1", "table", (0.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
+        TruthFixture("T2", "table", (0.4, 0.0, 0.0), (1.0, 1.0, 1.0)),
+    ]
+    predicted = [
+        node("P1", (0.3, 0.0, 0.0), "fixture", "table"),
+        node("P2", (-0.5, 0.0, 0.0), "fixture", "table"),
+    ]
+    scores = fixture_scores(truth, predicted)
+    assert scores.fixture_map == {"T2": "P1", "T1": "P2"}
+    assert scores.center_error == pytest.approx(0.3)
+    assert (scores.precision, scores.recall, scores.f1, scores.count_mae) == (1.0, 1.0, 1.0, 0.0)
+
+
+def test_fixture_scores_with_nothing_on_either_side() -> None:
+    scores = fixture_scores([], [])
+    assert (scores.precision, scores.recall, scores.f1, scores.matched) == (0.0, 0.0, 0.0, 0)
+    assert scores.center_error is None
+    assert scores.count_mae == 0.0
+    assert scores.fixture_map == {}
+
+
+def test_mean_std_uses_the_sample_deviation() -> None:
+    # mean 2.5; squared deviations 2.25 + 0.25 + 0.25 + 2.25 = 5, / (4 - 1) -> std sqrt(5/3).
+    mean, std = mean_std([1.0, 2.0, 3.0, 4.0])
+    assert mean == 2.5
+    assert std == pytest.approx(math.sqrt(5 / 3))
+    assert mean_std([0.7]) == (0.7, 0.0)
