@@ -47,7 +47,7 @@ def main(argv: list[str] | None = None) -> int:
     openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
     register_token_commands(commands)  # `pbdag token create|list|revoke`
 
-    for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from bench
+    for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from evaluation
         try:
             entry_point.load()(commands)
         except Exception as error:  # a broken plugin must not take the service's commands down
