@@ -16,14 +16,28 @@ from pydantic import (
 from pydantic_core import PydanticCustomError
 
 # Strict numbers: the body is JSON, so "525" or true where a number belongs is a client bug,
-# not something to coerce silently.
+# not something to coerce silently. Every number is finite and inside a physical range; the
+# service's configurable limits (frames, detections, pixels, lengths) come on top of these.
 FiniteNumber = Annotated[float, Strict(), Field(allow_inf_nan=False)]
-PositiveNumber = Annotated[float, Strict(), Field(gt=0, allow_inf_nan=False)]
 # 8192 px per side bounds decoding work and stays under Pillow's decompression-bomb threshold.
 MAX_IMAGE_SIDE = 8192
 ImageSide = Annotated[int, Strict(), Field(gt=0, le=MAX_IMAGE_SIDE)]
+# Focal lengths of real cameras lie between a few tens and a few thousand pixels.
+FocalLength = Annotated[float, Strict(), Field(ge=1.0, le=100_000.0, allow_inf_nan=False)]
+PrincipalPoint = Annotated[float, Strict(), Field(ge=-100_000.0, le=100_000.0, allow_inf_nan=False)]
 PoseRow = Annotated[list[FiniteNumber], Field(min_length=4, max_length=4)]
-NonEmptyLabel = Annotated[str, Field(min_length=1, max_length=200)]
+# Seconds; unix time in 2026 is 1.8e9.
+Timestamp = Annotated[float, Strict(), Field(ge=-1e11, le=1e11, allow_inf_nan=False)]
+# An appearance vector's components (CLIP/SigLIP features are small numbers).
+EmbeddingValue = Annotated[float, Strict(), Field(ge=-1e6, le=1e6, allow_inf_nan=False)]
+# Open-vocabulary similarities: cosines or probabilities.
+Similarity = Annotated[float, Strict(), Field(ge=-1.0, le=1.0, allow_inf_nan=False)]
+# Printable text: no control characters (PostgreSQL cannot store NUL; logs must stay readable).
+PRINTABLE = r"^[^\x00-\x1f\x7f]*$"
+NonEmptyLabel = Annotated[str, Field(min_length=1, max_length=200, pattern=PRINTABLE)]
+Identifier = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[A-Za-z0-9._:-]+$")]
+# The databases store 64-bit signed integers.
+MAX_INT = 2**63 - 1
 
 
 def _check_rle_counts(value: object) -> str | list[int]:
@@ -59,8 +73,8 @@ class BaselineRef(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    scene_id: NonEmptyLabel = Field(description="Scene the baseline was frozen in.")
-    version: int = Field(ge=1, description="Baseline version in that scene.")
+    scene_id: Identifier = Field(description="Scene the baseline was frozen in.")
+    version: int = Field(ge=1, le=MAX_INT, description="Baseline version in that scene.")
 
 
 class SceneCreate(BaseModel):
@@ -68,7 +82,7 @@ class SceneCreate(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    name: str = Field(min_length=1, max_length=200, description="Human-readable scene name.")
+    name: NonEmptyLabel = Field(description="Human-readable scene name.")
     params: dict[str, Any] | None = Field(
         None,
         description="Overrides of the method's default parameters (a partial nested object); "
@@ -88,10 +102,14 @@ class Intrinsics(BaseModel):
 
     width: ImageSide = Field(description="Image width in pixels.")
     height: ImageSide = Field(description="Image height in pixels.")
-    fx: PositiveNumber = Field(description="Focal length along x, in pixels.")
-    fy: PositiveNumber = Field(description="Focal length along y, in pixels.")
-    cx: FiniteNumber = Field(description="Principal point x, in pixels.")
-    cy: FiniteNumber = Field(description="Principal point y, in pixels.")
+    fx: FocalLength = Field(description="Focal length along x, in pixels (1 to 100000).")
+    fy: FocalLength = Field(description="Focal length along y, in pixels (1 to 100000).")
+    cx: PrincipalPoint = Field(
+        description="Principal point x, in pixels (within a width of the image)."
+    )
+    cy: PrincipalPoint = Field(
+        description="Principal point y, in pixels (within a height of the image)."
+    )
 
 
 class DepthImage(BaseModel):
@@ -105,9 +123,10 @@ class DepthImage(BaseModel):
             "`f32`: little-endian float32 metres, row-major, 0 or NaN = invalid."
         )
     )
-    scale: PositiveNumber = Field(
+    scale: Annotated[float, Strict(), Field(gt=0, le=1.0, allow_inf_nan=False)] = Field(
         default=0.001,
-        description="Metres per PNG unit for `png16` (0.001 = millimetres); ignored for `f32`.",
+        description="Metres per PNG unit for `png16` (0.001 = millimetres, at most 1); "
+        "ignored for `f32`.",
     )
     data: str = Field(min_length=1, description="Base64 of the PNG file or of the float32 bytes.")
 
@@ -142,11 +161,11 @@ class DetectionIn(BaseModel):
         description="`object` for movable things, `fixture` for furniture and structure.",
     )
     mask: RleMask = Field(description="Instance mask, the size of the frame's depth image.")
-    embedding: Annotated[list[FiniteNumber], Field(min_length=1)] | None = Field(
+    embedding: Annotated[list[EmbeddingValue], Field(min_length=1)] | None = Field(
         default=None, description="Optional appearance embedding (raw, not normalized)."
     )
-    class_scores: dict[NonEmptyLabel, FiniteNumber] | None = Field(
-        default=None, description="Optional scores of alternative labels, by label."
+    class_scores: dict[NonEmptyLabel, Similarity] | None = Field(
+        default=None, description="Optional similarities (-1 to 1) of alternative labels, by label."
     )
 
 
@@ -156,7 +175,7 @@ class FrameIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     frame_id: NonEmptyLabel = Field(description="Client frame identifier, unique in the batch.")
-    timestamp: FiniteNumber = Field(description="Capture time of the frame, in seconds.")
+    timestamp: Timestamp = Field(description="Capture time of the frame, in seconds.")
     intrinsics: Intrinsics = Field(description="Pinhole intrinsics of the depth image.")
     pose: Annotated[list[PoseRow], Field(min_length=4, max_length=4)] = Field(
         description=(
@@ -175,11 +194,8 @@ class BatchIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    batch_id: str = Field(
-        min_length=1,
-        max_length=200,
-        pattern=r"^[A-Za-z0-9._:-]+$",
-        description="Client-chosen idempotency key: re-posting the same batch is a no-op.",
+    batch_id: Identifier = Field(
+        description="Client-chosen idempotency key: re-posting the same batch is a no-op."
     )
     frames: list[FrameIn] = Field(min_length=1, description="Frames of the batch, at least one.")
 
@@ -224,7 +240,7 @@ class InspectionIn(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    fixture_id: NonEmptyLabel = Field(description="The confirmed fixture inspected.")
+    fixture_id: Identifier = Field(description="The confirmed fixture inspected.")
     frames: list[FrameIn] = Field(
         min_length=1,
         description="The primary view first, then alternates (used only for retry, never fused).",
@@ -233,12 +249,8 @@ class InspectionIn(BaseModel):
         None,
         description="The client's model's verification of the fixture class at its support region.",
     )
-    capture_id: str | None = Field(
-        None,
-        min_length=1,
-        max_length=200,
-        pattern=r"^[A-Za-z0-9._:-]+$",
-        description="Client id of the capture (default: generated).",
+    capture_id: Identifier | None = Field(
+        None, description="Client id of the capture (default: generated)."
     )
 
     @field_validator("frames")

@@ -19,6 +19,11 @@ class Scene(BaseModel):
     params: dict[str, Any] = Field(
         description="The method parameters the scene's events are decided with."
     )
+    quarantined: str | None = Field(
+        None,
+        description="Why the scene takes no more writes (an unreadable event; `pbdag repair` "
+        "names the scene that replaces it), or null.",
+    )
 
 
 class SceneList(BaseModel):

@@ -13,6 +13,7 @@ from bench.perf_common import write_results
 from core.decide import decide
 from core.events import ObjectAdded, Observation
 from core.evolve import fold
+from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
 from core.state import SceneState
 from sim.camera import CameraModel, look_at
@@ -52,7 +53,10 @@ def twenty_objects_frame(seed: int) -> tuple[World, Frame]:
         intrinsics,
         pose,
         add_kinect_noise(view.depth, rng).astype(np.float32),
-        tuple(Detection(d.label, d.score, "object", d.mask, d.embedding) for d in detections),
+        tuple(
+            Detection(d.label, d.score, "object", Mask.from_array(d.mask), d.embedding)
+            for d in detections
+        ),
     )
     return world, frame
 

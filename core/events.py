@@ -25,6 +25,7 @@ __all__ = [
     "BaselineFrozen",
     "BaselineLoaded",
     "BaselineSource",
+    "BatchSkipped",
     "Event",
     "FixtureAdded",
     "FixtureEvidence",
@@ -186,6 +187,20 @@ class BaselineLoaded(Event):
     def touched_tracks(self) -> tuple[str, ...]:
         """The fixtures it loads."""
         return tuple(fixture.track_id for fixture in self.fixtures)
+
+
+@dataclass(frozen=True, kw_only=True)
+class BatchSkipped(Event):
+    """A batch that can never be applied was parked as dead; the scene moved on without it.
+
+    The memory lacks what that batch saw, and the log says so: an operator may requeue the
+    batch, which then applies after the batches that came in the meantime.
+    """
+
+    type: ClassVar[str] = "batch_skipped"
+    batch_id: str
+    attempts: int
+    reason: str
 
 
 # -- a track appears ---------------------------------------------------------------------------
@@ -417,6 +432,7 @@ _SINGLE_CLASS: dict[str, type[Event]] = {
         FixtureEvidence,
         BaselineFrozen,
         BaselineLoaded,
+        BatchSkipped,
         TrackConfirmed,
         TrackMoved,
         TrackReparented,

@@ -8,6 +8,7 @@ from collections.abc import Iterable
 from core.events import (
     BaselineFrozen,
     BaselineLoaded,
+    BatchSkipped,
     Event,
     FixtureAdded,
     FixtureEvidence,
@@ -59,6 +60,8 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 baselines.append(record)
                 for fixture_id in event.fixture_ids:
                     tracks[fixture_id] = tracks[fixture_id].evolved(pinned=True)
+            case BatchSkipped():
+                pass  # the log records the gap; the state is what the other batches made it
             case BaselineLoaded():
                 for fixture in event.fixtures:
                     tracks[fixture.track_id] = fixture

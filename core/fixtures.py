@@ -76,7 +76,7 @@ def voxel_evidence(
     max_range_m: float,
 ) -> VoxelEvidence | None:
     """Back-project a fixture mask's valid depth (every `mask_pixel_stride`-th pixel) into voxels."""
-    flat_index = np.flatnonzero(detection.mask)
+    flat_index = detection.mask.flat_indices()
     stride = params.mask_pixel_stride
     if stride > 1:
         rows, cols = np.divmod(flat_index, frame.intrinsics.width)

@@ -52,16 +52,23 @@ def world_to_camera(points: FloatArray, pose: FloatArray) -> FloatArray:
 
 
 def interior_pixels(
-    mask: npt.NDArray[np.bool_], flat_index: npt.NDArray[np.intp], erosion_px: int
+    mask_index: npt.NDArray[np.intp],
+    flat_index: npt.NDArray[np.intp],
+    width: int,
+    erosion_px: int,
 ) -> npt.NDArray[np.intp]:
-    """Flat indices of the mask eroded by `erosion_px`, computed on the mask's bounding box only."""
+    """Flat indices of the mask (`mask_index`) eroded by `erosion_px`, on the bounding box of
+    `flat_index` only (both sorted, C-order)."""
     if flat_index.size == 0 or erosion_px <= 0:
         return flat_index
-    width = mask.shape[1]
-    r0, r1 = int(flat_index[0] // width), int(flat_index[-1] // width) + 1  # indices are sorted
+    r0, r1 = int(flat_index[0] // width), int(flat_index[-1] // width) + 1
     cols = flat_index % width
     c0, c1 = int(cols.min()), int(cols.max()) + 1
-    local_rows, local_cols = np.nonzero(erode_square(mask[r0:r1, c0:c1], erosion_px))
+    rows_all, cols_all = np.divmod(mask_index, width)
+    inside = (rows_all >= r0) & (rows_all < r1) & (cols_all >= c0) & (cols_all < c1)
+    crop = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+    crop[rows_all[inside] - r0, cols_all[inside] - c0] = True
+    local_rows, local_cols = np.nonzero(erode_square(crop, erosion_px))
     flat: npt.NDArray[np.intp] = (local_rows + r0) * width + (local_cols + c0)
     return flat
 
@@ -109,15 +116,15 @@ def ground_detection(
     detection_index: int = -1,
 ) -> Proposal | None:
     """Back-project a mask's valid depth through (K, T); None when valid-depth support is too small."""
-    flat_index = np.flatnonzero(detection.mask)
-    depth_m = frame.depth.reshape(-1)[flat_index].astype(np.float64)
+    mask_index = detection.mask.flat_indices()
+    depth_m = frame.depth.reshape(-1)[mask_index].astype(np.float64)
     in_range = (depth_m >= min_range_m) & (depth_m <= max_range_m)
     if int(in_range.sum()) < params.min_valid_depth_pixels:
         return None
-    flat_index, depth_m = flat_index[in_range], depth_m[in_range]
+    flat_index, depth_m = mask_index[in_range], depth_m[in_range]
     # Leakage sits on the mask's rim: anchor the median on the interior when it is large enough.
     interior_depth = frame.depth.reshape(-1)[
-        interior_pixels(detection.mask, flat_index, params.boundary_erosion_px)
+        interior_pixels(mask_index, flat_index, frame.intrinsics.width, params.boundary_erosion_px)
     ]
     interior: FloatArray = interior_depth[
         (interior_depth >= min_range_m) & (interior_depth <= max_range_m)

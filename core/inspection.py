@@ -17,6 +17,7 @@ from core.decide import ground_frame
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
 from core.events import Event, InspectionRecorded, ObjectAdded, TrackConfirmed
 from core.geometry import Proposal
+from core.masks import Mask, mask_iou
 from core.observation import Frame
 from core.params import Params
 from core.state import InspectionStatus, SceneState, Track
@@ -35,18 +36,14 @@ def support_region_visible(fixture: Track, frame: Frame, params: Params) -> int:
     return int(samples_passed(center, extent, frame, params.visibility)[0])
 
 
-def suppress(
-    proposals: Sequence[Proposal], masks: Sequence[np.ndarray], params: Params
-) -> list[int]:
+def suppress(proposals: Sequence[Proposal], masks: Sequence[Mask], params: Params) -> list[int]:
     """Indices kept by same-class NMS and cross-class overlap suppression (by mask IoU)."""
     order = sorted(range(len(proposals)), key=lambda i: (-proposals[i].score, i))
     kept: list[int] = []
     for i in order:
         clash = False
         for k in kept:
-            inter = np.count_nonzero(masks[i] & masks[k])
-            union = np.count_nonzero(masks[i] | masks[k])
-            iou = inter / union if union else 0.0
+            iou = mask_iou(masks[i], masks[k])
             limit = (
                 params.inspection.nms_mask_iou
                 if proposals[i].label == proposals[k].label

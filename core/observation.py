@@ -9,6 +9,8 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
+from core.masks import Mask
+
 DetectionKind = Literal["object", "fixture"]
 
 
@@ -31,7 +33,7 @@ class Detection:
     label: str
     score: float
     kind: DetectionKind
-    mask: npt.NDArray[np.bool_]  # (height, width)
+    mask: Mask  # the frame's size; run lengths, decoded by the stage that needs the pixels
     embedding: npt.NDArray[np.float64] | None = None  # raw appearance vector, not normalized
     class_scores: Mapping[str, float] | None = None
 

@@ -1,4 +1,5 @@
-"""`pbdag`: serve the API, run workers, migrate, rebuild projections, export the OpenAPI file."""
+"""`pbdag`: serve the API, run workers, migrate, export the OpenAPI file (and the commands of
+service/auth_cli.py and service/admin_cli.py)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import threading
 from importlib.metadata import entry_points
 from pathlib import Path
 
+from service.admin_cli import register as register_admin_commands
 from service.auth_cli import register as register_token_commands
 from service.settings import Settings
 
@@ -38,14 +40,10 @@ def main(argv: list[str] | None = None) -> int:
 
     commands.add_parser("migrate", help="create or upgrade the database schema")
 
-    rebuild = commands.add_parser(
-        "rebuild", help="drop every projection, rebuild it from the log, report differences"
-    )
-    rebuild.add_argument("--scene", action="append", help="only these scenes (repeatable)")
-
     openapi = commands.add_parser("openapi", help="write the OpenAPI document")
     openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
     register_token_commands(commands)  # `pbdag token create|list|revoke`
+    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair`
 
     for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from evaluation
         try:
@@ -63,7 +61,6 @@ def main(argv: list[str] | None = None) -> int:
         "serve": _serve,
         "worker": _worker,
         "migrate": _migrate,
-        "rebuild": _rebuild,
         "openapi": _openapi,
     }
     return handlers[args.command](args)
@@ -118,29 +115,6 @@ def _migrate(_args: argparse.Namespace) -> int:
     container = build_container()
     print(f"pbdag: schema of {_redacted(container.settings.resolved_database_url())} is up to date")
     return 0
-
-
-def _rebuild(args: argparse.Namespace) -> int:
-    from service.bootstrap import build_container
-    from service.store.projection import rebuild_scene
-
-    container = build_container()
-    scene_ids = args.scene or [scene.id for scene in container.log.scenes()]
-    differed = False
-    for scene_id in scene_ids:
-        report = rebuild_scene(container.log, scene_id)
-        verdict = "identical" if report.identical else "DIFFERED"
-        print(
-            f"{scene_id}: {report.events} events replayed; tracks and snapshots {verdict}"
-            + (
-                f" (tracks {report.tracks_differ}, snapshots {report.snapshots_differ})"
-                if not report.identical
-                else ""
-            )
-        )
-        differed |= not report.identical
-    print("rebuild: projections differed from the log" if differed else "rebuild: no difference")
-    return 1 if differed else 0
 
 
 def _openapi(args: argparse.Namespace) -> int:

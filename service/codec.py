@@ -6,6 +6,8 @@ import base64
 import binascii
 import hashlib
 import io
+import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -15,6 +17,7 @@ from PIL import Image
 
 from api_schema import BatchIn, DepthImage, DetectionIn, FrameIn, RleMask
 from core.errors import PbdagError
+from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
 
 __all__ = [
@@ -22,7 +25,6 @@ __all__ = [
     "compressed_rle_counts",
     "content_sha256",
     "decode_batch",
-    "rle_runs_to_mask",
 ]
 
 SIXTEEN_BIT_PNG_MODES = frozenset({"I;16", "I;16B", "I"})
@@ -51,17 +53,106 @@ def content_sha256(body: dict[str, Any]) -> str:
     return hashlib.sha256(canonical_json(body)).hexdigest()
 
 
-def decode_batch(batch: BatchIn) -> Batch:
+@dataclass(frozen=True)
+class InputLimits:
+    """What one request may ask the service to decode; the settings say (PBDAG_MAX_*)."""
+
+    max_frames_per_batch: int = 16
+    max_detections_per_frame: int = 256
+    max_image_pixels: int = 2_400_000  # 1920 x 1200 fits
+    max_embedding_length: int = 4096
+    max_class_scores: int = 64
+    max_label_length: int = 100
+
+
+# A camera pose further than this from the world origin is a unit or frame error (voxel keys
+# also hold +-52 km only).
+MAX_POSE_TRANSLATION_M = 10_000.0
+
+
+def decode_batch(batch: BatchIn, limits: InputLimits | None = None) -> Batch:
     """Decode every frame of a batch; raise `InvalidObservation` on the first bad field."""
-    frames = tuple(
-        _decode_frame(frame, f"frames[{index}]") for index, frame in enumerate(batch.frames)
-    )
-    return Batch(batch_id=batch.batch_id, frames=frames)
+    return Batch(batch_id=batch.batch_id, frames=decode_frames(batch.frames, "frames", limits))
 
 
-def decode_frames(frames: list[FrameIn], path: str = "frames") -> tuple[Frame, ...]:
-    """Decode a list of frames (an inspection's views); `InvalidObservation` names the field."""
+def decode_frames(
+    frames: list[FrameIn], path: str = "frames", limits: InputLimits | None = None
+) -> tuple[Frame, ...]:
+    """Decode a list of frames (a batch, an inspection's views); the error names the field.
+
+    Every limit is checked before anything is decoded, so a request over a limit costs nothing.
+    """
+    limits = limits or InputLimits()
+    if len(frames) > limits.max_frames_per_batch:
+        raise InvalidObservation(
+            path,
+            f"has {len(frames)} frames; the limit is {limits.max_frames_per_batch} "
+            "(PBDAG_MAX_FRAMES_PER_BATCH)",
+        )
+    for index, frame in enumerate(frames):
+        _check_limits(frame, f"{path}[{index}]", limits)
     return tuple(_decode_frame(frame, f"{path}[{index}]") for index, frame in enumerate(frames))
+
+
+def _check_limits(frame: FrameIn, path: str, limits: InputLimits) -> None:
+    """Sizes and physical ranges of one frame, before any decoding."""
+    intrinsics = frame.intrinsics
+    pixels = intrinsics.width * intrinsics.height
+    if pixels > limits.max_image_pixels:
+        raise InvalidObservation(
+            f"{path}.intrinsics",
+            f"a {intrinsics.width} x {intrinsics.height} image has {pixels} pixels; the limit is "
+            f"{limits.max_image_pixels} (PBDAG_MAX_IMAGE_PIXELS)",
+        )
+    for name, value, side in (
+        ("cx", intrinsics.cx, intrinsics.width),
+        ("cy", intrinsics.cy, intrinsics.height),
+    ):
+        if not -side <= value <= 2 * side:
+            raise InvalidObservation(
+                f"{path}.intrinsics.{name}",
+                f"principal point {value} is more than an image size outside the image",
+            )
+    translation = max(abs(frame.pose[row][3]) for row in range(3))
+    if math.isfinite(translation) and translation > MAX_POSE_TRANSLATION_M:  # NaN: see _decode_pose
+        raise InvalidObservation(
+            f"{path}.pose",
+            f"translation {translation:g} m is beyond {MAX_POSE_TRANSLATION_M:g} m of the origin",
+        )
+    if len(frame.detections) > limits.max_detections_per_frame:
+        raise InvalidObservation(
+            f"{path}.detections",
+            f"has {len(frame.detections)} detections; the limit is "
+            f"{limits.max_detections_per_frame} (PBDAG_MAX_DETECTIONS_PER_FRAME)",
+        )
+    for index, detection in enumerate(frame.detections):
+        where = f"{path}.detections[{index}]"
+        labels = [detection.label, *(detection.class_scores or {})]
+        if max(len(label) for label in labels) > limits.max_label_length:
+            raise InvalidObservation(
+                f"{where}.label"
+                if len(detection.label) > limits.max_label_length
+                else f"{where}.class_scores",
+                f"labels have at most {limits.max_label_length} characters (PBDAG_MAX_LABEL_LENGTH)",
+            )
+        if (
+            detection.embedding is not None
+            and len(detection.embedding) > limits.max_embedding_length
+        ):
+            raise InvalidObservation(
+                f"{where}.embedding",
+                f"has {len(detection.embedding)} values; the limit is "
+                f"{limits.max_embedding_length} (PBDAG_MAX_EMBEDDING_LENGTH)",
+            )
+        if (
+            detection.class_scores is not None
+            and len(detection.class_scores) > limits.max_class_scores
+        ):
+            raise InvalidObservation(
+                f"{where}.class_scores",
+                f"has {len(detection.class_scores)} entries; the limit is "
+                f"{limits.max_class_scores} (PBDAG_MAX_CLASS_SCORES)",
+            )
 
 
 def _decode_frame(frame: FrameIn, path: str) -> Frame:
@@ -201,41 +292,38 @@ def _decode_detection(detection: DetectionIn, depth_shape: tuple[int, ...], path
     )
 
 
-def _decode_mask(rle: RleMask, depth_shape: tuple[int, ...], path: str) -> npt.NDArray[np.bool_]:
-    """Decode a COCO RLE mask of exactly the depth size to a C-ordered boolean array."""
+def _decode_mask(rle: RleMask, depth_shape: tuple[int, ...], path: str) -> Mask:
+    """Validate a COCO RLE mask of exactly the depth size; its pixels are decoded later, lazily."""
     height, width = rle.size
     if (height, width) != depth_shape:
         raise InvalidObservation(
             f"{path}.size",
             f"mask size {[height, width]} does not match the depth size {list(depth_shape)}",
         )
+    pixels = height * width
     if isinstance(rle.counts, str):
         try:
             runs = compressed_rle_counts(rle.counts)
         except ValueError as error:
             raise InvalidObservation(f"{path}.counts", str(error)) from error
+        # Each value holds at most 30 bits, so runs (and their int64 sum) cannot wrap round.
+        total = int(runs.sum())
+        too_long = runs.size > pixels + 1
     else:
-        runs = np.asarray(rle.counts, dtype=np.int64)
-        if runs.size and runs.min() < 0:
-            raise InvalidObservation(f"{path}.counts", "run lengths must be non-negative")
+        # Python ints: a hostile run of 2**62 must not wrap an int64 sum round to height x width.
+        too_long = len(rle.counts) > pixels + 1
+        total = sum(rle.counts) if not too_long else -1
+        runs = np.asarray(rle.counts, dtype=np.int64) if total == pixels else np.zeros(0, np.int64)
+    if too_long:
+        raise InvalidObservation(f"{path}.counts", f"has more runs than the {pixels} pixels")
     # A short RLE does not say what the remaining pixels are (pycocotools.mask.decode fills
     # them with uninitialized memory), so the total must be exact.
-    total = int(runs.sum())
-    if total != height * width:
+    if total != pixels:
         raise InvalidObservation(
             f"{path}.counts",
-            f"run lengths sum to {total}, expected height x width = {height * width}",
+            f"run lengths sum to {total}, expected height x width = {pixels}",
         )
-    return rle_runs_to_mask(runs, height, width)
-
-
-def rle_runs_to_mask(runs: npt.NDArray[np.int64], height: int, width: int) -> npt.NDArray[np.bool_]:
-    """Expand validated COCO run lengths (zeros first, column-major) to a C-ordered mask."""
-    # Same result as pycocotools.mask.decode, whose Cython wrapper warns under NumPy 2
-    # (an error in our test configuration); expanding the runs in NumPy is as fast.
-    run_values = np.arange(runs.size) % 2 == 1
-    column_major = np.repeat(run_values, runs)
-    return np.ascontiguousarray(column_major.reshape(width, height).T)
+    return Mask(height, width, runs)
 
 
 # Characters of COCO's compressed RLE: 6-bit groups stored as chr(48 + group).

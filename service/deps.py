@@ -7,8 +7,11 @@ from typing import Annotated
 from fastapi import Depends, Path, Query, Request
 
 from service.bootstrap import Container
+from service.settings import Settings
 from service.states import StateReader
+from service.store.errors import SceneQuarantined
 from service.store.event_log import SceneRecord
+from service.store.queue import Admission
 
 # Largest integer a query or path may carry: the databases store 64-bit signed integers.
 MAX_INT = 2**63 - 1
@@ -36,12 +39,32 @@ TrackId = Annotated[
 ]
 
 
-def existing_scene(scene_id: SceneId, container: ContainerDep) -> SceneRecord:
-    """The scene named in the path; SceneNotFound (404) before any work when it is absent."""
+def any_scene(scene_id: SceneId, container: ContainerDep) -> SceneRecord:
+    """The scene named in the path, quarantined or not; SceneNotFound (404) when absent."""
     return container.log.scene(scene_id)
 
 
-SceneDep = Annotated[SceneRecord, Depends(existing_scene)]
+def live_scene(scene: Annotated[SceneRecord, Depends(any_scene)]) -> SceneRecord:
+    """The scene named in the path; SceneQuarantined (409) once `pbdag repair` quarantined it."""
+    if scene.quarantined is not None:
+        raise SceneQuarantined(scene.id, scene.quarantined)
+    return scene
+
+
+# Every route but the scene itself and its raw log needs a scene that is not quarantined.
+SceneDep = Annotated[SceneRecord, Depends(live_scene)]
+AnySceneDep = Annotated[SceneRecord, Depends(any_scene)]
+
+
+def admission(settings: Settings) -> Admission:
+    """The bounds of every scene's queue."""
+    return Admission(
+        max_queued=settings.max_queued_batches_per_scene,
+        max_blob_bytes=settings.max_scene_blob_bytes,
+        retry_after_seconds=settings.queue_full_retry_after_seconds,
+    )
+
+
 AsOf = Annotated[
     int | None, Query(ge=0, le=MAX_INT, description="Seq to travel back to (default: the head).")
 ]

@@ -34,9 +34,12 @@ from service.store.errors import (
     BatchConflict,
     ConcurrencyConflict,
     SceneNotFound,
+    SceneQuarantined,
     SeqOutOfRange,
     StoreError,
+    UnreadableEvent,
 )
+from service.store.queue import NotRequeueable, QueueFull, QuotaExceeded
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 
@@ -78,11 +81,16 @@ PROBLEMS: dict[type[Exception], Problem] = {
     BatchConflict: Problem(409, "Conflict", "/problems/batch-conflict"),
     ConcurrencyConflict: Problem(409, "Conflict", "/problems/conflict"),
     StateConflict: Problem(409, "Conflict", "/problems/state-conflict"),
+    NotRequeueable: Problem(409, "Conflict", "/problems/not-requeueable"),
+    UnreadableEvent: Problem(409, "Scene needs repair", "/problems/scene-needs-repair"),
+    SceneQuarantined: Problem(409, "Scene quarantined", "/problems/scene-quarantined"),
     PayloadTooLarge: Problem(413, "Payload Too Large", "/problems/payload-too-large"),
     InvalidCommand: Problem(422, "Invalid command", "/problems/invalid-command"),
     InvalidParams: Problem(422, "Invalid parameters", "/problems/invalid-params"),
     InvalidObservation: Problem(422, "Invalid observation", "/problems/invalid-observation"),
     RateLimited: Problem(429, "Too Many Requests", "/problems/rate-limited"),
+    QueueFull: Problem(429, "Too Many Requests", "/problems/queue-full"),
+    QuotaExceeded: Problem(507, "Insufficient Storage", "/problems/quota-exceeded"),
     StoreError: INTERNAL,
 }
 

@@ -7,6 +7,7 @@ from pathlib import Path
 from pydantic import Field
 from pydantic_settings import SettingsConfigDict
 
+from service.codec import InputLimits
 from service.security_settings import SecuritySettings, with_database_password
 
 
@@ -23,14 +24,47 @@ class Settings(SecuritySettings):
         description="SQLAlchemy URL; default sqlite:///<data_dir>/pbdag.db. PostgreSQL: postgresql+psycopg://...",
     )
     max_body_bytes: int = Field(
-        64 * 1024 * 1024, description="Largest accepted request body (413 beyond)."
+        32 * 1024 * 1024, ge=1024, description="Largest accepted request body (413 beyond)."
+    )
+    # What one request may ask the service to decode (422 naming the field and the limit).
+    max_frames_per_batch: int = Field(16, ge=1, le=1024, description="Frames per batch.")
+    max_detections_per_frame: int = Field(
+        256, ge=1, le=100_000, description="Detections per frame."
+    )
+    max_image_pixels: int = Field(
+        2_400_000, ge=1, le=8192 * 8192, description="Width x height of a frame (1920 x 1200 fits)."
+    )
+    max_embedding_length: int = Field(4096, ge=1, description="Values of one appearance embedding.")
+    max_class_scores: int = Field(64, ge=1, description="Entries of one detection's class_scores.")
+    max_label_length: int = Field(100, ge=1, le=200, description="Characters of a label.")
+    # Backpressure and quotas.
+    max_queued_batches_per_scene: int = Field(
+        256,
+        ge=1,
+        description="Unfinished batches a scene may hold; more are a 429 with Retry-After.",
+    )
+    queue_full_retry_after_seconds: int = Field(
+        2, ge=1, description="Retry-After of a 429 for a full scene queue."
+    )
+    max_scene_blob_bytes: int = Field(
+        20 * 1024**3, ge=1, description="Raw batch bytes a scene may store; more are a 507."
     )
     lease_seconds: float = Field(
-        60.0, description="How long a worker owns a claimed batch before it is requeued."
+        60.0,
+        gt=0,
+        description="A claimed batch's lease; the worker renews it every third of this while it "
+        "works, and a batch whose worker stopped renewing returns to the queue.",
     )
     max_attempts: int = Field(
-        5, description="A batch that fails this many times is parked as dead."
+        8,
+        ge=1,
+        description="A batch failing this often for a passing reason (database unavailable...) is "
+        "parked as dead; a batch that can never succeed is dead at once.",
     )
+    retry_base_seconds: float = Field(
+        0.5, gt=0, description="First retry delay; doubles per attempt, with jitter."
+    )
+    retry_max_seconds: float = Field(60.0, gt=0, description="Longest retry delay.")
     snapshot_interval: int = Field(
         1000, description="Store a state snapshot every this many events."
     )
@@ -38,6 +72,17 @@ class Settings(SecuritySettings):
     state_cache_scenes: int = Field(
         64, description="Scene states a worker keeps in memory between batches."
     )
+
+    def input_limits(self) -> InputLimits:
+        """The decoding limits of one request."""
+        return InputLimits(
+            max_frames_per_batch=self.max_frames_per_batch,
+            max_detections_per_frame=self.max_detections_per_frame,
+            max_image_pixels=self.max_image_pixels,
+            max_embedding_length=self.max_embedding_length,
+            max_class_scores=self.max_class_scores,
+            max_label_length=self.max_label_length,
+        )
 
     def resolved_database_url(self) -> str:
         """The database URL, defaulting to the SQLite file under the data directory."""

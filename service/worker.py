@@ -1,16 +1,31 @@
-"""The worker: claim a batch, decode it, decide, and append events + projections + done atomically."""
+"""The worker: claim a batch, decode it, decide, and append events + projections + done atomically.
+
+Failures are of two kinds. A passing one (the database or the blob store unavailable, another
+writer first) is retried with exponential backoff and jitter, up to `max_attempts`. A batch that
+can never succeed (it does not decode, or deciding it fails or yields a non-finite number) is
+parked as dead at once, and the scene moves on: the log records the gap (`batch_skipped`), so a
+bad batch never stalls a robot's memory and never hides. Errors stored on a batch are short;
+the details go to the server log.
+"""
 
 from __future__ import annotations
 
 import logging
 import os
+import random
 import socket
 import threading
 import uuid
 from collections import OrderedDict
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+import pydantic
+import sqlalchemy as sa
 
 from api_schema import BatchIn
 from core.decide import decide
+from core.errors import PbdagError
 from core.state import SceneState
 from service.bootstrap import Container
 from service.codec import decode_batch
@@ -19,24 +34,46 @@ from service.store.queue import Claim
 
 logger = logging.getLogger("pbdag.worker")
 
+# Failures that may pass: the same batch can succeed on a later attempt.
+TRANSIENT = (sa.exc.OperationalError, sa.exc.InterfaceError, OSError, ConcurrencyConflict)
+MAX_ERROR_CHARS = 300
+
 
 def worker_name() -> str:
     """host:pid:random, unique per worker instance."""
     return f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
 
 
+def short_error(error: BaseException) -> tuple[str, bool]:
+    """(the message a client may read, whether a retry may succeed)."""
+    if isinstance(error, TRANSIENT):
+        return f"{type(error).__name__}: the database or the blob store failed; will retry", True
+    if isinstance(error, pydantic.ValidationError):
+        first = error.errors()[0]
+        where = ".".join(str(part) for part in first["loc"])
+        message = f"invalid batch: {where}: {first['msg']}"
+    elif isinstance(error, PbdagError):
+        message = f"rejected: {error.detail}"
+    else:
+        message = f"internal error ({type(error).__name__}) while deciding; see the server log"
+    return message[:MAX_ERROR_CHARS], False
+
+
 class Worker:
     """Processes queued batches, one scene's batches in arrival order."""
 
-    def __init__(self, container: Container, name: str | None = None) -> None:
+    def __init__(
+        self, container: Container, name: str | None = None, seed: int | None = None
+    ) -> None:
         self.container = container
         self.name = name or worker_name()
         self._states: OrderedDict[str, SceneState] = OrderedDict()
+        self._random = random.Random(seed)
 
     def run_once(self) -> bool:
-        """Requeue expired leases, then process one batch; False when none was waiting."""
+        """Settle expired leases, then process one batch; False when none was due."""
         settings = self.container.settings
-        self.container.queue.requeue_expired(settings.max_attempts)
+        self.settle_expired()
         claim = self.container.queue.claim(self.name, settings.lease_seconds)
         if claim is None:
             return False
@@ -57,7 +94,7 @@ class Worker:
         logger.info("worker %s stopped", self.name)
 
     def drain(self, max_batches: int = 1_000_000) -> int:
-        """Process until the queue is empty; the number of batches processed."""
+        """Process until no batch is due; the number of batches processed."""
         processed = 0
         while processed < max_batches and self.run_once():
             processed += 1
@@ -67,34 +104,104 @@ class Worker:
         """One batch end to end; failures are recorded on the batch, never raised."""
         container = self.container
         try:
-            body = container.blobs.get(claim.blob_key)
-            batch = decode_batch(BatchIn.model_validate_json(body))
-            state = self._state(claim.scene_id)
-            events = decide(state, batch)
-            with container.uow.begin() as work:
-                appended = work.append(claim.scene_id, state, events, batch_id=claim.batch_id)
-                work.complete(claim, appended.seqs)
+            with self._renewing(claim):
+                body = container.blobs.get(claim.blob_key)
+                batch = decode_batch(
+                    BatchIn.model_validate_json(body), container.settings.input_limits()
+                )
+                state = self._state(claim.scene_id)
+                events = decide(state, batch)
+                with container.uow.begin() as work:
+                    appended = work.append(claim.scene_id, state, events, batch_id=claim.batch_id)
+                    work.complete(claim, appended.seqs)
         except LeaseLost:
             self._states.pop(claim.scene_id, None)
             logger.warning("worker %s lost the lease of batch %s", self.name, claim.batch_id)
             return
-        except ConcurrencyConflict as error:
-            self._states.pop(claim.scene_id, None)
-            self._fail(claim, f"concurrency conflict: {error}")
-            return
         except Exception as error:
             self._states.pop(claim.scene_id, None)
-            logger.exception("worker %s: batch %s failed", self.name, claim.batch_id)
-            self._fail(claim, f"{type(error).__name__}: {error}")
+            self._failed(claim, error)
             return
         self._remember(claim.scene_id, appended.state)
 
-    def _fail(self, claim: Claim, error: str) -> None:
+    def _failed(self, claim: Claim, error: BaseException) -> None:
+        message, transient = short_error(error)
+        logger.error(
+            "batch %s of scene %s failed (attempt %d): %s",
+            claim.batch_id,
+            claim.scene_id,
+            claim.attempts,
+            message,
+            exc_info=not transient or logger.isEnabledFor(logging.DEBUG),
+        )
         try:
-            status = self.container.queue.fail(claim, error, self.container.settings.max_attempts)
-            logger.warning("batch %s %s: %s", claim.batch_id, status, error)
+            if transient and claim.attempts < self.container.settings.max_attempts:
+                self.container.queue.retry_later(claim, message, self.retry_delay(claim.attempts))
+            else:
+                self.skip(claim, message)
         except LeaseLost:
-            logger.warning("batch %s: lease lost before recording %s", claim.batch_id, error)
+            logger.warning("batch %s: lease lost before recording %s", claim.batch_id, message)
+        except Exception:
+            logger.exception("batch %s: could not record its failure", claim.batch_id)
+
+    def retry_delay(self, attempts: int) -> float:
+        """Exponential backoff with jitter: base * 2^(attempts - 1), capped, times 0.5-1.5."""
+        settings = self.container.settings
+        delay = min(settings.retry_max_seconds, settings.retry_base_seconds * 2 ** (attempts - 1))
+        return float(delay * self._random.uniform(0.5, 1.5))
+
+    def skip(self, claim: Claim, reason: str) -> None:
+        """Dead, and the gap recorded in the scene's log, in one transaction."""
+        for _attempt in range(5):  # a command may append meanwhile: decide on the new head
+            state = self.container.log.load_state(claim.scene_id)
+            try:
+                with self.container.uow.begin() as work:
+                    work.skip(claim, state, reason)
+                logger.warning(
+                    "batch %s of scene %s is dead: %s", claim.batch_id, claim.scene_id, reason
+                )
+                return
+            except ConcurrencyConflict:
+                continue
+        raise ConcurrencyConflict(f"scene {claim.scene_id!r} kept changing", "scene_id")
+
+    def settle_expired(self) -> None:
+        """Leases nobody renewed: back to the queue with backoff, or dead when out of attempts."""
+        settings = self.container.settings
+        for claim in self.container.queue.expired():
+            reason = f"lease expired on attempt {claim.attempts} (the worker stopped)"
+            try:
+                if claim.attempts < settings.max_attempts:
+                    self.container.queue.retry_later(
+                        claim, reason, self.retry_delay(claim.attempts)
+                    )
+                else:
+                    self.skip(claim, reason)
+            except LeaseLost:
+                continue  # another worker settled it first
+
+    @contextmanager
+    def _renewing(self, claim: Claim) -> Iterator[None]:
+        """Renew the lease every third of its length while the batch is worked on."""
+        lease = self.container.settings.lease_seconds
+        stop = threading.Event()
+
+        def heartbeat() -> None:
+            while not stop.wait(lease / 3):
+                try:
+                    if not self.container.queue.renew(claim, lease):
+                        logger.warning("batch %s: lease lost while working", claim.batch_id)
+                        return
+                except Exception:
+                    logger.exception("batch %s: lease renewal failed", claim.batch_id)
+
+        beat = threading.Thread(target=heartbeat, name="pbdag-lease", daemon=True)
+        beat.start()
+        try:
+            yield
+        finally:
+            stop.set()
+            beat.join()
 
     def _state(self, scene_id: str) -> SceneState:
         """The scene's state at its head: the cached one if nobody appended since, else loaded."""

@@ -8,8 +8,9 @@ from typing import Annotated
 from fastapi import APIRouter, Path, Response
 
 from api_schema import BatchIn, BatchStatus
+from service.auth import RequireAdmin
 from service.codec import canonical_json, decode_batch
-from service.deps import ContainerDep, SceneDep
+from service.deps import ContainerDep, SceneDep, admission
 from service.errors import NotFound
 from service.wire import batch_out
 
@@ -27,17 +28,31 @@ def post_batch(
     scene: SceneDep, batch: BatchIn, response: Response, container: ContainerDep
 ) -> BatchStatus:
     """Validate and durably queue a batch (202); the same batch_id and content again returns the original (200)."""
-    decode_batch(batch)  # 422 naming the field; nothing is stored for a bad batch
+    settings = container.settings
+    decode_batch(batch, settings.input_limits())  # 422 naming the field; nothing is stored
     # The blob is the canonical JSON, so its key is the content hash used for idempotency.
     content = canonical_json(batch.model_dump(mode="json"))
     content_sha256 = hashlib.sha256(content).hexdigest()
+    bounds = admission(settings)
+    if container.queue.get(scene.id, batch.batch_id) is None:
+        container.queue.admit(scene.id, len(content), bounds)  # 429 / 507 before any write
     blob_key = container.blobs.put(content)
     record, created = container.queue.submit(
-        scene.id, batch.batch_id, content_sha256, blob_key, len(batch.frames)
+        scene.id, batch.batch_id, content_sha256, blob_key, len(batch.frames), len(content), bounds
     )
     if not created:
         response.status_code = 200
     return batch_out(record)
+
+
+@router.post("/{batch_id}/requeue", response_model=BatchStatus)
+def requeue_batch(
+    scene: SceneDep, batch_id: BatchId, container: ContainerDep, _admin: RequireAdmin
+) -> BatchStatus:
+    """Put a dead batch back in the queue (admin scope); it applies at its turn."""
+    if container.queue.get(scene.id, batch_id) is None:
+        raise NotFound("batch", batch_id, "batch_id")
+    return batch_out(container.queue.requeue(scene.id, batch_id))
 
 
 @router.get("/{batch_id}", response_model=BatchStatus)

@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 
 from api_schema import EventOut, EventPage
-from service.deps import MAX_INT, ContainerDep, SceneDep
+from service.deps import MAX_INT, AnySceneDep, ContainerDep
 from service.wire import event_out
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["events"])
@@ -15,7 +15,7 @@ router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["events"])
 
 @router.get("/events", response_model=EventPage)
 def list_events(
-    scene: SceneDep,
+    scene: AnySceneDep,
     container: ContainerDep,
     after: Annotated[
         int,

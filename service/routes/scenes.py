@@ -8,7 +8,7 @@ from api_schema import Scene, SceneCreate, SceneList
 from core.events import BaselineSource
 from core.params import Params
 from service.commands import create_scene
-from service.deps import ContainerDep, SceneDep
+from service.deps import AnySceneDep, ContainerDep
 from service.errors import NotFound
 from service.store.baselines import read_package
 from service.wire import scene_out
@@ -40,6 +40,6 @@ def list_scenes(container: ContainerDep) -> SceneList:
 
 
 @router.get("/{scene_id}", response_model=Scene)
-def get_scene(scene: SceneDep) -> Scene:
+def get_scene(scene: AnySceneDep) -> Scene:
     """One scene with its head seq and parameters."""
     return scene_out(scene)

@@ -41,3 +41,22 @@ class SeqOutOfRange(StoreError):
 
     def __init__(self, detail: str) -> None:
         super().__init__(detail, "as_of")
+
+
+class UnreadableEvent(StoreError):
+    """A stored event that cannot be decoded (written by an older version that let NaN through)."""
+
+    def __init__(self, seq: int, reason: str) -> None:
+        super().__init__(
+            f"event {seq} cannot be read ({reason}); `pbdag repair` quarantines the scene and "
+            "rebuilds it as a new scene from the events before it",
+        )
+        self.seq = seq
+        self.reason = reason
+
+
+class SceneQuarantined(StoreError):
+    """The scene was quarantined by `pbdag repair`: it takes no writes, its state is not served."""
+
+    def __init__(self, scene_id: str, reason: str) -> None:
+        super().__init__(f"scene {scene_id!r} is quarantined: {reason}", "scene_id")

@@ -14,14 +14,22 @@ from typing import Any
 
 import numpy as np
 import orjson
+import pydantic
 import sqlalchemy as sa
 
+from core.errors import field_path
 from core.events import BaselineSource, Event, SceneCreated, event_from_record, non_finite_field
 from core.evolve import fold
 from core.params import Params
 from core.state import SNAPSHOT_FORMAT_VERSION, SceneState
 from service.store.engine import read_transaction
-from service.store.errors import ConcurrencyConflict, NonFiniteEvent, SceneNotFound, SeqOutOfRange
+from service.store.errors import (
+    ConcurrencyConflict,
+    NonFiniteEvent,
+    SceneNotFound,
+    SeqOutOfRange,
+    UnreadableEvent,
+)
 from service.store.tables import events, scenes, snapshots
 
 READ_PAGE = 5000
@@ -36,6 +44,7 @@ class SceneRecord:
     params: dict[str, Any]
     head_seq: int
     created_at: float
+    quarantined: str | None = None  # why the scene takes no more writes (see `pbdag repair`)
 
 
 @dataclass(frozen=True)
@@ -53,20 +62,16 @@ class StoredEvent:
     details: dict[str, Any]
 
     def to_core(self) -> Event:
-        """The typed core event."""
-        return event_from_record(
-            {
-                "type": self.type,
-                "track_id": self.track_id,
-                "state": self.state,
-                "frame_id": self.frame_id,
-                "details": self.details,
-            }
+        """The typed core event (UnreadableEvent when the row cannot be one)."""
+        return decoded_event(
+            self.seq, self.type, self.track_id, self.state, self.frame_id, self.details
         )
 
 
 def _scene(row: sa.Row[Any]) -> SceneRecord:
-    return SceneRecord(row.id, row.name, orjson.loads(row.params), row.head_seq, row.created_at)
+    return SceneRecord(
+        row.id, row.name, orjson.loads(row.params), row.head_seq, row.created_at, row.quarantined
+    )
 
 
 def _stored(scene_id: str, row: sa.Row[Any]) -> StoredEvent:
@@ -106,17 +111,37 @@ def gc_paused() -> Iterator[None]:
             gc.enable()
 
 
-def _core_event(row: sa.Row[Any, Any, Any, Any, Any]) -> Event:
+def decoded_event(
+    seq: int,
+    type_name: str,
+    track_id: str | None,
+    state: str | None,
+    frame_id: str | None,
+    details: str | dict[str, Any],
+) -> Event:
+    """A stored row as its typed event; UnreadableEvent names the seq and the field otherwise."""
+    try:
+        payload = orjson.loads(details) if isinstance(details, str) else details
+        return event_from_record(
+            {
+                "type": type_name,
+                "track_id": track_id,
+                "state": state,
+                "frame_id": frame_id,
+                "details": payload,
+            }
+        )
+    except pydantic.ValidationError as error:
+        first = error.errors()[0]
+        where = field_path(["details", *first["loc"]])
+        raise UnreadableEvent(seq, f"{where}: {first['msg']}") from None
+    except (ValueError, TypeError, KeyError) as error:
+        raise UnreadableEvent(seq, str(error)) from None
+
+
+def _core_event(row: sa.Row[Any, Any, Any, Any, Any, Any]) -> Event:
     """A log row straight to its core event (the as_of path skips StoredEvent)."""
-    return event_from_record(
-        {
-            "type": row.type,
-            "track_id": row.track_id,
-            "state": row.state,
-            "frame_id": row.frame_id,
-            "details": orjson.loads(row.details),
-        }
-    )
+    return decoded_event(row.seq, row.type, row.track_id, row.state, row.frame_id, row.details)
 
 
 def encode_snapshot(state: SceneState) -> bytes:
@@ -176,7 +201,7 @@ class EventLog:
         )
         created = SceneCreated(name=name, params=params.to_dict(), baseline=baseline)
         connection.execute(events.insert(), [self._event_row(scene_id, 0, created, None, now)])
-        return SceneRecord(scene_id, name, params.to_dict(), 0, now), created
+        return SceneRecord(scene_id, name, params.to_dict(), 0, now, None), created
 
     def scene(self, scene_id: str, connection: sa.Connection | None = None) -> SceneRecord:
         """The scene row; SceneNotFound when absent."""
@@ -307,6 +332,7 @@ class EventLog:
             base = self._snapshot_at_or_before(connection, scene_id, target) or SceneState()
             rows = connection.execute(
                 sa.select(
+                    events.c.seq,
                     events.c.type,
                     events.c.track_id,
                     events.c.state,
@@ -348,6 +374,12 @@ class EventLog:
                 format_version=SNAPSHOT_VERSION,
                 body=encode_snapshot(state),
             )
+        )
+
+    def quarantine(self, connection: sa.Connection, scene_id: str, reason: str) -> None:
+        """The scene takes no more writes and its state is not served; its log stays as it is."""
+        connection.execute(
+            sa.update(scenes).where(scenes.c.id == scene_id).values(quarantined=reason)
         )
 
     def snapshot_seqs(self, scene_id: str) -> list[int]:

@@ -1,4 +1,9 @@
-"""The batch queue: durable jobs, leased claims, arrival order per scene, fenced completion."""
+"""The batch queue: durable jobs, leased claims, arrival order per scene, fenced completion.
+
+Admission is bounded (a per-scene queue bound and a per-scene quota of raw batch bytes); a
+failed attempt waits for its retry (`not_before`, set by the worker's backoff); a worker renews
+its lease while it works; a dead batch can be requeued by an operator.
+"""
 
 from __future__ import annotations
 
@@ -9,12 +14,49 @@ from typing import Any
 
 import sqlalchemy as sa
 
+from core.errors import PbdagError
 from service.store.engine import read_transaction, write_transaction
-from service.store.errors import BatchConflict, LeaseLost
+from service.store.errors import BatchConflict, LeaseLost, StoreError
 from service.store.tables import batches
 
 CLAIMABLE = ("queued", "failed")  # failed: an attempt failed, the batch waits for a retry
 UNFINISHED = ("queued", "failed", "running")  # these hold back later batches of the scene
+
+
+class QueueFull(PbdagError):
+    """The scene holds as many unfinished batches as it may: the client retries later."""
+
+    def __init__(self, queued: int, limit: int, retry_after: int) -> None:
+        super().__init__(
+            f"the scene has {queued} unfinished batches, its limit "
+            f"(PBDAG_MAX_QUEUED_BATCHES_PER_SCENE) is {limit}; retry in {retry_after} s",
+            None,
+            {"Retry-After": str(retry_after)},
+        )
+
+
+class QuotaExceeded(PbdagError):
+    """The scene's raw batches would exceed its byte quota."""
+
+    def __init__(self, stored: int, incoming: int, limit: int) -> None:
+        super().__init__(
+            f"the scene stores {stored} bytes of raw batches; {incoming} more would exceed its "
+            f"quota (PBDAG_MAX_SCENE_BLOB_BYTES) of {limit}",
+            None,
+        )
+
+
+class NotRequeueable(StoreError):
+    """Only a dead batch can be requeued."""
+
+
+@dataclass(frozen=True)
+class Admission:
+    """The bounds a scene's queue holds to."""
+
+    max_queued: int
+    max_blob_bytes: int
+    retry_after_seconds: int
 
 
 @dataclass(frozen=True)
@@ -36,6 +78,8 @@ class BatchRecord:
     last_seq: int | None
     received_at: float
     finished_at: float | None
+    not_before: float | None
+    blob_bytes: int
 
 
 @dataclass(frozen=True)
@@ -70,33 +114,73 @@ class BatchQueue:
         self.engine = engine
         self.clock = clock
 
+    # -- admission ----------------------------------------------------------------------------
+
+    def check_admission(
+        self, scene_id: str, incoming_bytes: int, bounds: Admission, connection: sa.Connection
+    ) -> None:
+        """QueueFull (429) or QuotaExceeded (507) when the scene cannot take another batch."""
+        queued, stored = connection.execute(
+            sa.select(
+                sa.func.count().filter(batches.c.status.in_(UNFINISHED)),
+                sa.func.coalesce(sa.func.sum(batches.c.blob_bytes), 0),
+            ).where(batches.c.scene_id == scene_id)
+        ).one()
+        if queued >= bounds.max_queued:
+            raise QueueFull(int(queued), bounds.max_queued, bounds.retry_after_seconds)
+        if stored + incoming_bytes > bounds.max_blob_bytes:
+            raise QuotaExceeded(int(stored), incoming_bytes, bounds.max_blob_bytes)
+
+    def admit(self, scene_id: str, incoming_bytes: int, bounds: Admission) -> None:
+        """The admission check alone, before the blob is written."""
+        with read_transaction(self.engine) as connection:
+            self.check_admission(scene_id, incoming_bytes, bounds, connection)
+
     def submit(
-        self, scene_id: str, batch_id: str, content_sha256: str, blob_key: str, frame_count: int
+        self,
+        scene_id: str,
+        batch_id: str,
+        content_sha256: str,
+        blob_key: str,
+        frame_count: int,
+        blob_bytes: int,
+        bounds: Admission,
     ) -> tuple[BatchRecord, bool]:
-        """Queue a batch; (record, True) when new, the original when re-posted with equal content."""
-        with write_transaction(self.engine) as connection:
-            existing = self._get(connection, scene_id, batch_id)
-            if existing is not None:
-                if existing.content_sha256 != content_sha256:
-                    raise BatchConflict(
-                        f"batch {batch_id!r} was already posted with different content"
+        """Queue a batch; (record, True) when new, the original when re-posted with equal content.
+
+        Two posts of one batch racing each other both end here: the loser of the unique
+        constraint reads the winner's row (PostgreSQL's reads are not serialized as SQLite's).
+        """
+        try:
+            with write_transaction(self.engine) as connection:
+                existing = self._get(connection, scene_id, batch_id)
+                if existing is None:
+                    self.check_admission(scene_id, blob_bytes, bounds, connection)
+                    connection.execute(
+                        batches.insert().values(
+                            scene_id=scene_id,
+                            batch_id=batch_id,
+                            content_sha256=content_sha256,
+                            blob_key=blob_key,
+                            frame_count=frame_count,
+                            status="queued",
+                            attempts=0,
+                            received_at=self.clock(),
+                            blob_bytes=blob_bytes,
+                        )
                     )
-                return existing, False
-            connection.execute(
-                batches.insert().values(
-                    scene_id=scene_id,
-                    batch_id=batch_id,
-                    content_sha256=content_sha256,
-                    blob_key=blob_key,
-                    frame_count=frame_count,
-                    status="queued",
-                    attempts=0,
-                    received_at=self.clock(),
-                )
-            )
-            created = self._get(connection, scene_id, batch_id)
-        assert created is not None
-        return created, True
+                    created = self._get(connection, scene_id, batch_id)
+                    assert created is not None
+                    return created, True
+        except sa.exc.IntegrityError:
+            existing = self.get(scene_id, batch_id)
+            if existing is None:
+                raise
+        if existing.content_sha256 != content_sha256:
+            raise BatchConflict(f"batch {batch_id!r} was already posted with different content")
+        return existing, False
+
+    # -- reads --------------------------------------------------------------------------------
 
     def get(self, scene_id: str, batch_id: str) -> BatchRecord | None:
         """The batch's record, or None."""
@@ -109,17 +193,37 @@ class BatchQueue:
         ).first()
         return None if row is None else _record(row)
 
+    def of_scene(self, scene_id: str) -> list[BatchRecord]:
+        """Every batch of a scene, in arrival order."""
+        with read_transaction(self.engine) as connection:
+            rows = connection.execute(
+                sa.select(batches).where(batches.c.scene_id == scene_id).order_by(batches.c.id)
+            ).all()
+        return [_record(row) for row in rows]
+
+    def counts(self, scene_id: str | None = None) -> dict[str, int]:
+        """Number of batches per status."""
+        query = sa.select(batches.c.status, sa.func.count()).group_by(batches.c.status)
+        if scene_id is not None:
+            query = query.where(batches.c.scene_id == scene_id)
+        with read_transaction(self.engine) as connection:
+            return {status: int(n) for status, n in connection.execute(query).all()}
+
+    # -- the worker's side --------------------------------------------------------------------
+
     def claim(self, owner: str, lease_seconds: float) -> Claim | None:
-        """Lease the oldest claimable batch that is the first unfinished one of its scene."""
+        """Lease the oldest due batch that is the first unfinished one of its scene."""
+        now = self.clock()
         earlier = batches.alias("earlier")
         first_of_scene = ~sa.exists().where(
             earlier.c.scene_id == batches.c.scene_id,
             earlier.c.id < batches.c.id,
             earlier.c.status.in_(UNFINISHED),
         )
+        due = sa.or_(batches.c.not_before.is_(None), batches.c.not_before <= now)
         pick = (
             sa.select(batches.c.id)
-            .where(batches.c.status.in_(CLAIMABLE), first_of_scene)
+            .where(batches.c.status.in_(CLAIMABLE), due, first_of_scene)
             .order_by(batches.c.id)
             .limit(1)
             .with_for_update(skip_locked=True)  # PostgreSQL; SQLite serializes via BEGIN IMMEDIATE
@@ -134,7 +238,7 @@ class BatchQueue:
                 .values(
                     status="running",
                     lease_owner=owner,
-                    lease_until=self.clock() + lease_seconds,
+                    lease_until=now + lease_seconds,
                     attempts=batches.c.attempts + 1,
                 )
                 .returning(
@@ -149,71 +253,138 @@ class BatchQueue:
             return None
         return Claim(row.id, row.scene_id, row.batch_id, row.blob_key, owner, row.attempts)
 
-    def requeue_expired(self, max_attempts: int) -> int:
-        """Expired leases go back to the queue, or to `dead` once their attempts are used up."""
-        now = self.clock()
-        expired = sa.and_(batches.c.status == "running", batches.c.lease_until < now)
+    def renew(self, claim: Claim, lease_seconds: float) -> bool:
+        """Extend the lease while the batch is worked on; False when it is no longer ours."""
         with write_transaction(self.engine) as connection:
-            dead = connection.execute(
+            updated = connection.execute(
                 sa.update(batches)
-                .where(expired, batches.c.attempts >= max_attempts)
-                .values(
-                    status="dead",
-                    lease_owner=None,
-                    finished_at=now,
-                    error=sa.func.coalesce(batches.c.error, "lease expired on every attempt"),
-                )
+                .where(held_by(claim))
+                .values(lease_until=self.clock() + lease_seconds)
             ).rowcount
-            requeued = connection.execute(
-                sa.update(batches)
-                .where(expired)
-                .values(status="failed", lease_owner=None, error="lease expired")
-            ).rowcount
-        return int(dead + requeued)
+        return bool(updated == 1)
 
-    def fail(self, claim: Claim, error: str, max_attempts: int) -> str:
-        """Record a failed attempt (fenced by the lease); returns the new status."""
-        status = "dead" if claim.attempts >= max_attempts else "failed"
+    def expired(self) -> list[Claim]:
+        """Running batches whose worker stopped renewing their lease (crashed, or cut off)."""
+        with read_transaction(self.engine) as connection:
+            rows = connection.execute(
+                sa.select(batches).where(
+                    batches.c.status == "running", batches.c.lease_until < self.clock()
+                )
+            ).all()
+        return [
+            Claim(row.id, row.scene_id, row.batch_id, row.blob_key, row.lease_owner, row.attempts)
+            for row in rows
+        ]
+
+    def retry_later(self, claim: Claim, error: str, delay_seconds: float) -> None:
+        """Record a failed attempt and when it may be retried (fenced by the lease)."""
         with write_transaction(self.engine) as connection:
             updated = connection.execute(
                 sa.update(batches)
                 .where(held_by(claim))
                 .values(
-                    status=status,
+                    status="failed",
                     lease_owner=None,
-                    error=error[:4000],
-                    finished_at=self.clock() if status == "dead" else None,
+                    lease_until=None,
+                    error=error,
+                    not_before=self.clock() + delay_seconds,
                 )
             ).rowcount
         if updated != 1:
             raise LeaseLost(f"batch {claim.batch_id!r}: lease lost before the failure was recorded")
-        return status
 
     def complete(
         self, connection: sa.Connection, claim: Claim, seqs: tuple[int, int] | None
     ) -> None:
         """Mark done inside the append transaction; LeaseLost (so the caller rolls back) if not ours."""
         first_seq, last_seq = seqs if seqs is not None else (None, None)
+        self._finish(connection, claim, status="done", first_seq=first_seq, last_seq=last_seq)
+
+    def mark_dead(self, connection: sa.Connection, claim: Claim, error: str) -> None:
+        """Park the batch as dead inside the transaction that records the skip in the log."""
+        self._finish(connection, claim, status="dead", error=error)
+
+    def _finish(self, connection: sa.Connection, claim: Claim, **values: Any) -> None:
         updated = connection.execute(
             sa.update(batches)
             .where(held_by(claim))
             .values(
-                status="done",
                 lease_owner=None,
                 lease_until=None,
-                error=None,
-                first_seq=first_seq,
-                last_seq=last_seq,
+                not_before=None,
                 finished_at=self.clock(),
+                **{"error": None, **values},
             )
         ).rowcount
         if updated != 1:
-            raise LeaseLost(f"batch {claim.batch_id!r}: lease lost, append rolled back")
+            raise LeaseLost(f"batch {claim.batch_id!r}: lease lost, the transaction rolled back")
 
-    def counts(self, scene_id: str | None = None) -> dict[str, int]:
-        """Number of batches per status."""
-        query = sa.select(batches.c.status, sa.func.count()).group_by(batches.c.status)
-        if scene_id is not None:
-            query = query.where(batches.c.scene_id == scene_id)
-        with read_transaction(self.engine) as connection:
-            return {status: int(n) for status, n in connection.execute(query).all()}
+    # -- operators ----------------------------------------------------------------------------
+
+    def requeue(self, scene_id: str, batch_id: str) -> BatchRecord:
+        """A dead batch goes back to the queue with fresh attempts (it runs at its turn)."""
+        with write_transaction(self.engine) as connection:
+            updated = connection.execute(
+                sa.update(batches)
+                .where(
+                    batches.c.scene_id == scene_id,
+                    batches.c.batch_id == batch_id,
+                    batches.c.status == "dead",
+                )
+                .values(
+                    status="queued",
+                    attempts=0,
+                    error=None,
+                    not_before=None,
+                    finished_at=None,
+                    first_seq=None,
+                    last_seq=None,
+                )
+            ).rowcount
+            record = self._get(connection, scene_id, batch_id)
+        if record is None:
+            raise NotRequeueable(f"batch {batch_id!r} does not exist", "batch_id")
+        if updated != 1:
+            raise NotRequeueable(
+                f"batch {batch_id!r} is {record.status}; only a dead batch can be requeued",
+                "batch_id",
+            )
+        return record
+
+    # -- repair -------------------------------------------------------------------------------
+
+    def copy_into(
+        self, connection: sa.Connection, scene_id: str, record: BatchRecord, *, done: bool
+    ) -> None:
+        """A batch of another scene in this one: as it was when `done`, else queued afresh."""
+        kept = {"first_seq": record.first_seq, "last_seq": record.last_seq} if done else {}
+        connection.execute(
+            batches.insert().values(
+                scene_id=scene_id,
+                batch_id=record.batch_id,
+                content_sha256=record.content_sha256,
+                blob_key=record.blob_key,
+                frame_count=record.frame_count,
+                status="done" if done else "queued",
+                attempts=record.attempts if done else 0,
+                received_at=record.received_at,
+                finished_at=record.finished_at if done else None,
+                blob_bytes=record.blob_bytes,
+                **kept,
+            )
+        )
+
+    def retire_scene(self, connection: sa.Connection, scene_id: str, reason: str) -> None:
+        """Every unfinished batch of a scene is parked dead (its scene takes no more writes)."""
+        connection.execute(
+            sa.update(batches)
+            .where(batches.c.scene_id == scene_id, batches.c.status.in_(UNFINISHED))
+            .values(
+                status="dead",
+                lease_owner=None,
+                lease_until=None,
+                not_before=None,
+                error=reason,
+                finished_at=self.clock(),
+            )
+        )

@@ -14,6 +14,8 @@ scenes = sa.Table(
     sa.Column("params", sa.Text, nullable=False),  # canonical JSON, also in the seq-0 event
     sa.Column("head_seq", sa.BigInteger, nullable=False),
     sa.Column("created_at", sa.Float, nullable=False),  # unix seconds
+    # Why the scene takes no more writes (an unreadable event; see `pbdag repair`), or NULL.
+    sa.Column("quarantined", sa.Text),
 )
 
 # The append-only log: rows are inserted, never updated or deleted.
@@ -56,6 +58,8 @@ batches = sa.Table(
     sa.Column("last_seq", sa.BigInteger),
     sa.Column("received_at", sa.Float, nullable=False),
     sa.Column("finished_at", sa.Float),
+    sa.Column("not_before", sa.Float),  # a failed attempt's retry waits until then (backoff)
+    sa.Column("blob_bytes", sa.BigInteger, nullable=False, server_default="0"),  # for quotas
     sa.UniqueConstraint("scene_id", "batch_id", name="uq_batches_scene_batch"),
 )
 sa.Index("ix_batches_status_id", batches.c.status, batches.c.id)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import sqlalchemy as sa
 
-from core.events import BaselineFrozen, BaselineSource, Event
+from core.events import BaselineFrozen, BaselineSource, BatchSkipped, Event
 from core.evolve import evolve, fold
 from core.params import Params
 from core.state import SceneState
@@ -92,6 +92,13 @@ class Writes:
     def complete(self, claim: Claim, seqs: tuple[int, int] | None) -> None:
         """Mark the claimed batch done; LeaseLost (the whole transaction rolls back) if not ours."""
         self.unit.queue.complete(self.connection, claim, seqs)
+
+    def skip(self, claim: Claim, state: SceneState, reason: str) -> Appended:
+        """Park the claimed batch as dead and record the gap in the scene's log (`batch_skipped`)."""
+        skipped = BatchSkipped(batch_id=claim.batch_id, attempts=claim.attempts, reason=reason)
+        appended = self.append(claim.scene_id, state, [skipped], batch_id=claim.batch_id)
+        self.unit.queue.mark_dead(self.connection, claim, reason)
+        return appended
 
     def _project(
         self,

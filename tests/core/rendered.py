@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
 from sim.camera import CameraModel, look_at
 from sim.render import render
@@ -43,13 +44,15 @@ def frame(world: World, eye, target, frame_id: str, scores=SCORES, objects: bool
             fixture_scores = scores[fixture.id]
             top = max(fixture_scores, key=fixture_scores.get)
             detections.append(
-                Detection(top, fixture_scores[top], "fixture", mask, None, fixture_scores)
+                Detection(
+                    top, fixture_scores[top], "fixture", Mask.from_array(mask), None, fixture_scores
+                )
             )
     if objects:
         for index, box in enumerate(world.objects):
             mask = view.instance == index
             if mask.sum() >= 30:
-                detections.append(Detection(box.label, 0.9, "object", mask, None))
+                detections.append(Detection(box.label, 0.9, "object", Mask.from_array(mask), None))
     return Frame(frame_id, 0.0, INTRINSICS, pose, view.depth.astype(np.float32), tuple(detections))
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
 
 INTRINSICS = Intrinsics(width=160, height=120, fx=130.0, fy=130.0, cx=79.5, cy=59.5)
@@ -40,7 +41,9 @@ def paint_box(depth: np.ndarray, center: tuple[float, float, float], size: float
 
 def detection(label: str, mask: np.ndarray, embedding: np.ndarray | None = None) -> Detection:
     """An object detection with an optional embedding."""
-    return Detection(label=label, score=0.9, kind="object", mask=mask, embedding=embedding)
+    return Detection(
+        label=label, score=0.9, kind="object", mask=Mask.from_array(mask), embedding=embedding
+    )
 
 
 def frame(

@@ -8,6 +8,7 @@ import numpy as np
 
 from core.decide import decide
 from core.evolve import fold
+from core.masks import Mask
 from core.params import Params
 from core.state import SceneState
 from tests.core.scenes import look_pose, scene_batch
@@ -173,12 +174,13 @@ def test_boundary_leak_does_not_drag_the_center():
     # 9 px of cube and a 2 px rim of wall: more leaked pixels than object pixels
     batch = scene_batch("b0", {"mug_1": ((0.2, 0.1, 2.0), 0.14)})
     frame = batch.frames[0]
-    leaked = np.zeros_like(frame.detections[0].mask)
-    rows, cols = np.nonzero(frame.detections[0].mask)
+    mask = frame.detections[0].mask.to_array()
+    leaked = np.zeros_like(mask)
+    rows, cols = np.nonzero(mask)
     leaked[rows.min() - 2 : rows.max() + 3, cols.min() - 2 : cols.max() + 3] = (
         True  # bleeds onto the wall
     )
-    detection = type(frame.detections[0])("mug", 0.9, "object", leaked)
+    detection = type(frame.detections[0])("mug", 0.9, "object", Mask.from_array(leaked))
     leaky = type(batch)(
         "b0",
         (
@@ -189,7 +191,7 @@ def test_boundary_leak_does_not_drag_the_center():
     )
     events = decide(SceneState(), leaky)
     center = events[0].details()["observations"][0]["center"]
-    assert np.count_nonzero(leaked) > 2 * np.count_nonzero(frame.detections[0].mask) - 10
+    assert np.count_nonzero(leaked) > 2 * np.count_nonzero(mask) - 10
     assert math.dist(center, (0.2, 0.1, 1.93)) < 0.03
 
 

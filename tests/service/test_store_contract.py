@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
+
 import pytest
 import sqlalchemy as sa
 
@@ -19,6 +21,7 @@ from service.store.errors import (
     SeqOutOfRange,
 )
 from service.store.projection import rebuild_scene
+from service.store.queue import Admission, NotRequeueable, QueueFull, QuotaExceeded
 from service.store.tables import tracks
 
 
@@ -165,9 +168,12 @@ def test_rebuild_reports_no_difference_then_detects_a_tampered_projection(contai
     assert rebuild_scene(container.log, scene.id).identical  # the rebuild repaired it
 
 
+BOUNDS = Admission(max_queued=100, max_blob_bytes=10**9, retry_after_seconds=2)
+
+
 class TestQueue:
-    def submit(self, container, scene_id, batch_id, sha="a" * 64):
-        return container.queue.submit(scene_id, batch_id, sha, "blob-" + batch_id, 1)
+    def submit(self, container, scene_id, batch_id, sha="a" * 64, size=100, bounds=BOUNDS):
+        return container.queue.submit(scene_id, batch_id, sha, "blob-" + batch_id, 1, size, bounds)
 
     def test_submit_is_idempotent_and_conflicts_on_new_content(self, container):
         scene = new_scene(container)
@@ -176,6 +182,30 @@ class TestQueue:
         assert created and not created_again and again.id == first.id
         with pytest.raises(BatchConflict):
             self.submit(container, scene.id, "b1", sha="b" * 64)
+
+    def test_concurrent_posts_of_one_batch_store_it_once(self, container):
+        """Six posts racing: one row, every caller gets it (PostgreSQL's UniqueViolation)."""
+        scene = new_scene(container)
+        with ThreadPoolExecutor(6) as pool:
+            results = list(pool.map(lambda _: self.submit(container, scene.id, "b1"), range(6)))
+        assert len({record.id for record, _created in results}) == 1
+        assert sum(created for _record, created in results) == 1
+
+    def test_a_full_queue_and_a_full_quota_refuse_new_batches_only(self, container):
+        scene = new_scene(container)
+        bounds = Admission(max_queued=2, max_blob_bytes=250, retry_after_seconds=3)
+        self.submit(container, scene.id, "b1", bounds=bounds)
+        self.submit(container, scene.id, "b2", bounds=bounds)
+        with pytest.raises(QueueFull) as full:
+            self.submit(container, scene.id, "b3", bounds=bounds)
+        assert full.value.headers == {"Retry-After": "3"}
+        assert self.submit(container, scene.id, "b2", bounds=bounds)[1] is False  # a re-post
+        claim = container.queue.claim("w", 30)
+        with container.uow.begin() as work:
+            work.complete(claim, None)
+        with pytest.raises(QuotaExceeded):  # 200 bytes stored, 100 more exceed 250
+            self.submit(container, scene.id, "b3", bounds=bounds)
+        assert container.queue.counts(scene.id) == {"done": 1, "queued": 1}
 
     def test_batches_of_one_scene_are_claimed_in_arrival_order_one_at_a_time(self, container):
         one = new_scene(container, "one")
@@ -204,33 +234,54 @@ class TestQueue:
             work.complete(stolen, appended.seqs)
         assert container.log.scene(scene.id).head_seq == 0  # the append rolled back with it
         assert container.queue.get(scene.id, "b1").status == "running"
+        assert not container.queue.renew(stolen, 30) and container.queue.renew(claim, 30)
 
-    def test_expired_leases_are_requeued_then_parked_dead(self, container):
+    def test_a_failed_attempt_waits_for_its_retry(self, container):
         now = [1000.0]
         container.queue.clock = lambda: now[0]
         scene = new_scene(container)
         self.submit(container, scene.id, "b1")
-        for attempt in (1, 2, 3):
-            claim = container.queue.claim(f"w{attempt}", 10)
-            assert claim.attempts == attempt
-            now[0] += 11
-            assert container.queue.requeue_expired(max_attempts=3) == 1
+        claim = container.queue.claim("w", 30)
+        container.queue.retry_later(claim, "OperationalError: will retry", 4.0)
         record = container.queue.get(scene.id, "b1")
-        assert record.status == "dead" and "lease expired" in record.error
-        assert container.queue.claim("w9", 10) is None
+        assert (record.status, record.not_before) == ("failed", 1004.0)
+        assert container.queue.claim("w", 30) is None  # not yet due
+        now[0] = 1004.5
+        assert container.queue.claim("w", 30).attempts == 2
 
-    def test_failures_retry_then_go_dead_with_the_error_kept(self, container):
+    def test_a_renewed_lease_does_not_expire_and_an_abandoned_one_does(self, container):
+        now = [1000.0]
+        container.queue.clock = lambda: now[0]
+        scene = new_scene(container)
+        self.submit(container, scene.id, "b1")
+        claim = container.queue.claim("w", 10)
+        now[0] = 1008.0
+        assert container.queue.renew(claim, 10)
+        now[0] = 1015.0  # past the first lease, inside the renewed one
+        assert container.queue.expired() == []
+        now[0] = 1019.0
+        assert [c.batch_id for c in container.queue.expired()] == ["b1"]
+
+    def test_a_dead_batch_is_recorded_in_the_log_and_can_be_requeued(self, container):
         scene = new_scene(container)
         self.submit(container, scene.id, "b1")
         self.submit(container, scene.id, "b2")
-        statuses = []
-        for _ in range(3):
-            claim = container.queue.claim("w", 30)
-            assert claim.batch_id == "b1"
-            statuses.append(container.queue.fail(claim, "ValueError: bad", max_attempts=3))
-        assert statuses == ["failed", "failed", "dead"]
-        assert container.queue.get(scene.id, "b1").error == "ValueError: bad"
-        assert container.queue.claim("w", 30).batch_id == "b2"  # a dead batch no longer blocks
+        claim = container.queue.claim("w", 30)
+        state = container.log.load_state(scene.id)
+        with container.uow.begin() as work:
+            work.skip(claim, state, "rejected: frames[0].depth: not a PNG")
+        [skipped] = container.log.read(scene.id, event_type="batch_skipped")
+        assert (skipped.batch_id, skipped.details["reason"]) == (
+            "b1",
+            "rejected: frames[0].depth: not a PNG",
+        )
+        record = container.queue.get(scene.id, "b1")
+        assert record.status == "dead" and record.error == "rejected: frames[0].depth: not a PNG"
+        assert container.queue.claim("w", 30).batch_id == "b2"  # the scene moved on
+        with pytest.raises(NotRequeueable):
+            container.queue.requeue(scene.id, "b2")  # running, not dead
+        requeued = container.queue.requeue(scene.id, "b1")
+        assert (requeued.status, requeued.attempts, requeued.error) == ("queued", 0, None)
 
 
 def test_initial_state_is_empty(container):
@@ -264,7 +315,7 @@ def test_concurrent_migrations_are_serialized(backend, tmp_path, request):
         with engine.connect() as connection:
             assert (
                 connection.exec_driver_sql("select version_num from alembic_version").scalar()
-                == "0003"
+                == "0004"
             )
     finally:
         engine.dispose()

@@ -1,0 +1,119 @@
+"""Operator commands: `pbdag rebuild`, `pbdag requeue`, `pbdag repair`."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from core.errors import PbdagError
+
+
+def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the operator commands to `pbdag`."""
+    rebuild = commands.add_parser(
+        "rebuild",
+        help="drop every projection, rebuild it from the log, report differences per scene",
+    )
+    rebuild.add_argument("--scene", action="append", help="only these scenes (repeatable)")
+    rebuild.set_defaults(handler=_rebuild)
+
+    requeue = commands.add_parser(
+        "requeue", help="put dead batches back in the queue (they apply at their turn)"
+    )
+    requeue.add_argument("--scene", required=True, help="the scene")
+    which = requeue.add_mutually_exclusive_group(required=True)
+    which.add_argument("--batch", action="append", help="a dead batch id (repeatable)")
+    which.add_argument("--all-dead", action="store_true", help="every dead batch of the scene")
+    requeue.set_defaults(handler=_requeue)
+
+    repair = commands.add_parser(
+        "repair",
+        help="quarantine a scene whose log holds an unreadable event and rebuild it as a new scene",
+    )
+    repair.add_argument("scene", help="the scene to check and, if needed, repair")
+    repair.set_defaults(handler=_repair)
+
+
+def _rebuild(args: argparse.Namespace) -> int:
+    from service.bootstrap import build_container
+    from service.store.projection import rebuild_scene
+
+    container = build_container()
+    quarantined = {scene.id for scene in container.log.scenes() if scene.quarantined}
+    scene_ids = args.scene or [scene.id for scene in container.log.scenes()]
+    failed = False
+    for scene_id in scene_ids:  # one scene's failure never stops the others
+        if scene_id in quarantined:
+            print(f"{scene_id}: quarantined (see `pbdag repair`); skipped")
+            continue
+        try:
+            report = rebuild_scene(container.log, scene_id)
+        except PbdagError as error:
+            print(f"{scene_id}: FAILED: {error.detail}")
+            failed = True
+            continue
+        except Exception as error:
+            print(f"{scene_id}: FAILED: {type(error).__name__}: {error}")
+            failed = True
+            continue
+        differences = (
+            ""
+            if report.identical
+            else f" (tracks {report.tracks_differ}, snapshots {report.snapshots_differ}, "
+            f"baselines {report.baselines_differ})"
+        )
+        verdict = "identical" if report.identical else "DIFFERED"
+        print(f"{scene_id}: {report.events} events replayed; projections {verdict}{differences}")
+        failed |= not report.identical
+    print("rebuild: some scenes differed or failed" if failed else "rebuild: no difference")
+    return 1 if failed else 0
+
+
+def _requeue(args: argparse.Namespace) -> int:
+    from service.bootstrap import build_container
+
+    container = build_container()
+    batch_ids = args.batch or [
+        record.batch_id
+        for record in container.queue.of_scene(args.scene)
+        if record.status == "dead"
+    ]
+    if not batch_ids:
+        print(f"scene {args.scene}: no dead batch")
+        return 0
+    code = 0
+    for batch_id in batch_ids:
+        try:
+            container.queue.requeue(args.scene, batch_id)
+            print(f"{args.scene}/{batch_id}: queued again")
+        except PbdagError as error:
+            print(f"{args.scene}/{batch_id}: {error.detail}", file=sys.stderr)
+            code = 1
+    return code
+
+
+def _repair(args: argparse.Namespace) -> int:
+    from service.bootstrap import build_container
+    from service.repair import repair_scene
+
+    container = build_container()
+    try:
+        report = repair_scene(container, args.scene)
+    except PbdagError as error:
+        print(f"pbdag repair: {error.detail}", file=sys.stderr)
+        return 2
+    if report.healthy:
+        print(f"{args.scene}: every event reads and folds; nothing to repair")
+        return 0
+    print(
+        f"{args.scene}: event {report.bad_seq} cannot be read ({report.reason}).\n"
+        f"  quarantined; repaired as scene {report.new_scene_id}: {report.events_copied} events "
+        f"copied, {report.batches_done} batches kept as done, {report.batches_requeued} queued "
+        "again (a worker decides them anew)"
+    )
+    if report.commands_dropped:
+        print(
+            f"  commands after the bad event were not replayed (seqs {report.commands_dropped}); "
+            "issue them again on the new scene if still wanted"
+        )
+    return 0
