@@ -284,3 +284,21 @@ class InspectionQueue(BaseModel):
     """Q_t of section 3.4."""
 
     fixtures: list[InspectionQueueItem]
+
+
+class ProblemField(BaseModel):
+    """One offending field of a request and why."""
+
+    field: str | None = Field(description="A path such as `frames[0].pose`, or null.")
+    reason: str
+
+
+class Problem(BaseModel):
+    """An RFC 9457 problem document: every error of the API (`application/problem+json`)."""
+
+    type: str = Field(description="A URI reference naming the problem (`/problems/...`).")
+    title: str
+    status: int
+    detail: str = Field(description="What went wrong, in one sentence.")
+    field: str | None = Field(description="The offending request field, or null.")
+    errors: list[ProblemField] = Field(description="Every offending field.")

@@ -12,6 +12,7 @@ from service.bootstrap import Container, build_container
 from service.errors import install_problem_handlers
 from service.middleware.body_limit import BodySizeLimit
 from service.middleware.unexpected import UnexpectedErrors
+from service.openapi import install_openapi
 from service.routes import (
     baselines,
     batches,
@@ -58,7 +59,8 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.state.states = StateReader(container.log)
     install_problem_handlers(app)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
-    install_security(app, container)  # hosts, CORS, tokens, rate limits: before the body limit
+    install_security(app, container)
+    install_openapi(app)  # hosts, CORS, tokens, rate limits: before the body limit
     app.add_middleware(UnexpectedErrors)  # outermost of ours: a 500 keeps the connection
     for module in (scenes, batches, graph, events, tracks, verifications, baselines, inspections):
         app.include_router(module.router)

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Path, Query, Request
 
+from api_schema.requests import PRINTABLE
 from service.bootstrap import Container
 from service.settings import Settings
 from service.states import StateReader
@@ -63,6 +64,11 @@ def admission(settings: Settings) -> Admission:
         max_blob_bytes=settings.max_scene_blob_bytes,
         retry_after_seconds=settings.queue_full_retry_after_seconds,
     )
+
+
+def text_query(description: str, max_length: int = 200) -> Any:
+    """A printable string query parameter (PostgreSQL cannot compare against a NUL)."""
+    return Query(max_length=max_length, pattern=PRINTABLE, description=description)
 
 
 AsOf = Annotated[

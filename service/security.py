@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
 
 from fastapi import FastAPI
 from starlette.concurrency import run_in_threadpool
@@ -37,6 +36,7 @@ from service.auth import (
 )
 from service.bootstrap import Container
 from service.errors import send_problem
+from service.openapi import OPEN_PATHS
 from service.ratelimit import RateLimiter
 
 __all__ = [
@@ -47,8 +47,6 @@ __all__ = [
 ]
 
 # Liveness probes must not need a token (they carry none).
-OPEN_PATHS = frozenset({"/healthz"})
-BEARER_SCHEME = "bearer"
 
 
 # --- Host names -------------------------------------------------------------------------------
@@ -196,8 +194,7 @@ def _route_path(scope: Scope) -> str:
 
 
 def install_security(app: FastAPI, container: Container) -> None:
-    """Add the layers above (after every other middleware, so they run first) and declare the
-    bearer scheme in the OpenAPI document."""
+    """Add the layers above (after every other middleware, so they run first)."""
     settings = container.settings
     limiter = (
         RateLimiter(settings.rate_limit_per_minute, settings.rate_limit_burst)
@@ -214,29 +211,3 @@ def install_security(app: FastAPI, container: Container) -> None:
             expose_headers=["Retry-After", "WWW-Authenticate"],
         )
     app.add_middleware(AllowedHosts, allowed=settings.allowed_hosts)
-    _declare_bearer_scheme(app)
-
-
-def _declare_bearer_scheme(app: FastAPI) -> None:
-    """Every operation needs the bearer scheme except OPEN_PATHS (FastAPI's documented way of
-    extending the generated document: wrap `app.openapi`)."""
-    generate = app.openapi
-
-    def openapi_with_security() -> dict[str, Any]:
-        document = generate()  # cached by FastAPI; the additions below are idempotent
-        components = document.setdefault("components", {})
-        components.setdefault("securitySchemes", {})[BEARER_SCHEME] = {
-            "type": "http",
-            "scheme": "bearer",
-            "description": (
-                "`Authorization: Bearer pbdag_<id>_<secret>`, from `pbdag token create`. "
-                "Scopes: GET needs `read`, other methods `write`; `admin` implies both."
-            ),
-        }
-        document["security"] = [{BEARER_SCHEME: []}]
-        for path in OPEN_PATHS:
-            for operation in document.get("paths", {}).get(path, {}).values():
-                operation["security"] = []
-        return document
-
-    app.openapi = openapi_with_security  # type: ignore[method-assign]

@@ -7,7 +7,7 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 
 from api_schema import EventOut, EventPage
-from service.deps import MAX_INT, AnySceneDep, ContainerDep
+from service.deps import MAX_INT, AnySceneDep, ContainerDep, text_query
 from service.wire import event_out
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["events"])
@@ -24,12 +24,10 @@ def list_events(
         ),
     ] = -1,
     limit: Annotated[int, Query(ge=1, le=1000, description="Page size.")] = 100,
-    track_id: Annotated[
-        str | None, Query(max_length=64, description="Only events of this track.")
-    ] = None,
+    track_id: Annotated[str | None, text_query("Only events of this track.", 64)] = None,
     type: Annotated[
         str | None,
-        Query(max_length=64, description="Only events of this type (add, confirm, ...)."),
+        text_query("Only events of this type (add, confirm, ...).", 64),
     ] = None,
 ) -> EventPage:
     """Events after a seq cursor; `next_after` continues the listing (null at the end)."""

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query
 
 from api_schema import Graph
 from core.graph import graph_to_dict, pending_verifications, publish
-from service.deps import AsOf, SceneDep, StatesDep
+from service.deps import AsOf, SceneDep, StatesDep, text_query
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["graph"])
 
@@ -23,11 +23,9 @@ def get_graph(
         Query(description="`all` adds hypotheses, demoted and removed tracks."),
     ] = "published",
     parent: Annotated[
-        str | None, Query(max_length=64, description="Only nodes whose support parent is this.")
+        str | None, text_query("Only nodes whose support parent is this.", 64)
     ] = None,
-    label: Annotated[
-        str | None, Query(max_length=200, description="Only nodes of this class.")
-    ] = None,
+    label: Annotated[str | None, text_query("Only nodes of this class.", 200)] = None,
 ) -> Graph:
     """The graph at `as_of` (default now): confirmed nodes, or every track with include=all."""
     state = states.state(scene.id, as_of)

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query
 
 from api_schema import Explanation, TrackBelief
 from core.state import LifecycleState
-from service.deps import AsOf, ContainerDep, SceneDep, StatesDep, TrackId
+from service.deps import AsOf, ContainerDep, SceneDep, StatesDep, TrackId, text_query
 from service.errors import NotFound
 from service.explain import explain
 from service.store.projection import query_tracks
@@ -21,15 +21,11 @@ router = APIRouter(prefix="/v1/scenes/{scene_id}/tracks", tags=["tracks"])
 def list_tracks(
     scene: SceneDep,
     container: ContainerDep,
-    label: Annotated[
-        str | None, Query(max_length=200, description="Only tracks of this class.")
-    ] = None,
+    label: Annotated[str | None, text_query("Only tracks of this class.", 200)] = None,
     state: Annotated[
         LifecycleState | None, Query(description="Only tracks in this lifecycle state.")
     ] = None,
-    parent: Annotated[
-        str | None, Query(max_length=64, description="Only tracks supported by this parent.")
-    ] = None,
+    parent: Annotated[str | None, text_query("Only tracks supported by this parent.", 64)] = None,
 ) -> list[TrackBelief]:
     """Current tracks from the SQL projection, filtered by label, state or parent."""
     rows = query_tracks(container.engine, scene.id, label=label, state=state, parent=parent)

@@ -324,3 +324,34 @@ def test_the_problem_table_is_looked_up_along_the_class_hierarchy() -> None:
     assert problem_of(StateConflict("x")).status == 409
     assert problem_of(Unregistered("x")) is INTERNAL
     assert problem_of(RuntimeError("x")) is INTERNAL
+
+
+def test_a_500_keeps_the_keep_alive_connection() -> None:
+    """A real server: after an unexpected error the client's next request rides the same socket."""
+    import socket
+    import threading
+
+    import uvicorn
+
+    app, _calls = make_app()
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    server = uvicorn.Server(uvicorn.Config(app, host="127.0.0.1", port=port, log_level="critical"))
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    try:
+        for _ in range(100):
+            if server.started:
+                break
+            threading.Event().wait(0.05)
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}") as http:
+            failed = http.get("/boom")
+            assert failed.status_code == 500 and failed.headers.get("connection") != "close"
+            first_socket = failed.extensions["network_stream"].get_extra_info("socket")
+            after = http.get("/scenes/kitchen")
+            assert after.status_code == 404
+            assert after.extensions["network_stream"].get_extra_info("socket") is first_socket
+    finally:
+        server.should_exit = True
+        thread.join(timeout=10)

@@ -1,0 +1,243 @@
+"""How the worker fails: never a poisoned log, short errors, backoff, renewed leases, repair."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Iterator
+from typing import Any
+
+import orjson
+import pytest
+import sqlalchemy as sa
+from fastapi.testclient import TestClient
+
+from core.events import Event, ObjectAdded, Observation
+from core.observation import Batch
+from core.state import SceneState
+from service.app import create_app
+from service.bootstrap import Container
+from service.repair import repair_scene
+from service.store.engine import write_transaction
+from service.store.projection import rebuild_scene
+from service.store.tables import events as events_table
+from service.store.tables import scenes as scenes_table
+from service.worker import Worker
+from tests.clients import local_client
+from tests.service.test_codec import batch_body, frame_body
+
+
+@pytest.fixture
+def client(container: Container) -> Iterator[TestClient]:
+    with local_client(create_app(container)) as test_client:
+        yield test_client
+
+
+def post(client: TestClient, scene_id: str, batch_id: str) -> None:
+    body = batch_body(frame_body())
+    body["batch_id"] = batch_id
+    response = client.post(f"/v1/scenes/{scene_id}/batches", json=body)
+    assert response.status_code == 202, response.text
+
+
+def new_scene(client: TestClient) -> str:
+    return str(client.post("/v1/scenes", json={"name": "w"}).json()["id"])
+
+
+def status(client: TestClient, scene_id: str, batch_id: str) -> dict[str, Any]:
+    result: dict[str, Any] = client.get(f"/v1/scenes/{scene_id}/batches/{batch_id}").json()
+    return result
+
+
+def an_add(extent_x: float) -> ObjectAdded:
+    return ObjectAdded(
+        track_id="trk-000001",
+        state="tentative",
+        frame_id="f0",
+        observations=(
+            Observation(
+                frame_id="f0",
+                label="mug",
+                score=0.9,
+                center=(0.0, 0.0, 1.0),
+                extent=(extent_x, 0.1, 0.1),
+                valid_pixels=100,
+                parent=None,
+            ),
+        ),
+        embedding_sum=None,
+        embedding_count=0,
+        timestamp=0.0,
+        existence_logodds=1.0,
+        p_exist=0.73,
+        batches_observed=1,
+        parent_evidence={},
+    )
+
+
+def test_a_non_finite_event_is_never_stored_and_the_scene_moves_on(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    scene_id = new_scene(client)
+    post(client, scene_id, "poison")
+    post(client, scene_id, "fine")
+    calls: list[str] = []
+
+    def decide(state: SceneState, batch: Batch) -> list[Event]:
+        calls.append(batch.batch_id)
+        return [an_add(float("inf") if batch.batch_id == "poison" else 0.1)]
+
+    monkeypatch.setattr("service.worker.decide", decide)
+    Worker(container).drain()
+    poisoned = status(client, scene_id, "poison")
+    assert poisoned["status"] == "dead" and poisoned["attempts"] == 1  # no pointless retries
+    assert (
+        "non-finite" in poisoned["error"]
+        and "details.observations[0].extent[0]" in poisoned["error"]
+    )
+    assert status(client, scene_id, "fine")["status"] == "done"
+    types = [e["type"] for e in client.get(f"/v1/scenes/{scene_id}/events").json()["events"]]
+    assert types == ["scene_created", "batch_skipped", "add"]
+    assert client.get(f"/v1/scenes/{scene_id}/graph", params={"include": "all"}).status_code == 200
+    assert rebuild_scene(container.log, scene_id).identical
+
+
+def test_a_dead_batch_error_is_short_and_names_nothing_internal(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0")
+
+    def decide(state: SceneState, batch: Batch) -> list[Event]:
+        raise sa.exc.IntegrityError(
+            "INSERT INTO tracks (belief) VALUES ('" + "secret " * 600 + "')", {}, Exception()
+        )
+
+    monkeypatch.setattr("service.worker.decide", decide)
+    Worker(container).drain()
+    dead = status(client, scene_id, "b0")
+    assert dead["status"] == "dead" and len(dead["error"]) <= 300
+    assert "INSERT" not in dead["error"] and "secret" not in dead["error"]
+    assert "IntegrityError" in dead["error"]
+
+
+def test_a_passing_failure_backs_off_then_succeeds(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0")
+    real_get, failures = container.blobs.get, [OSError("blob store unreachable")]
+
+    def flaky_get(key: str) -> bytes:
+        if failures:
+            raise failures.pop()
+        return real_get(key)
+
+    monkeypatch.setattr(container.blobs, "get", flaky_get)
+    worker = Worker(container, seed=1)
+    assert worker.drain() == 1
+    failed = status(client, scene_id, "b0")
+    assert failed["status"] == "failed" and "will retry" in failed["error"]
+    assert worker.drain() == 0  # not due yet: its retry waits for the backoff
+    now = time.time() + 120
+    monkeypatch.setattr(container.queue, "clock", lambda: now)
+    assert worker.drain() == 1
+    done = status(client, scene_id, "b0")
+    assert (done["status"], done["attempts"], done["error"]) == ("done", 2, None)
+
+
+def test_retry_delays_grow_exponentially_with_jitter_up_to_the_cap(container: Container) -> None:
+    worker = Worker(container, seed=3)
+    settings = container.settings
+    for attempts in range(1, 12):
+        nominal = min(settings.retry_max_seconds, settings.retry_base_seconds * 2 ** (attempts - 1))
+        assert 0.5 * nominal <= worker.retry_delay(attempts) <= 1.5 * nominal
+    assert len({round(worker.retry_delay(3), 6) for _ in range(10)}) > 1  # jittered
+
+
+def test_the_lease_is_renewed_while_a_slow_batch_runs(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    container.settings.lease_seconds = 0.6
+    scene_id = new_scene(client)
+    post(client, scene_id, "slow")
+    real_decide = __import__("core.decide", fromlist=["decide"]).decide
+
+    def slow(state: SceneState, batch: Batch) -> list[Event]:
+        time.sleep(2.0)  # three leases long
+        events: list[Event] = real_decide(state, batch)
+        return events
+
+    monkeypatch.setattr("service.worker.decide", slow)
+    thief = Worker(container, name="thief")
+    first = threading.Thread(target=Worker(container, name="owner").drain)
+    first.start()
+    stolen = 0
+    while first.is_alive():
+        time.sleep(0.1)
+        thief.settle_expired()  # would requeue the batch if its lease had lapsed
+        stolen += container.queue.claim("thief", 0.6) is not None
+    first.join()
+    done = status(client, scene_id, "slow")
+    assert stolen == 0 and (done["status"], done["attempts"]) == ("done", 1)
+
+
+def poison_the_log(container: Container, scene_id: str) -> int:
+    """Append an event as an older version stored it: NaN written as null."""
+    record = orjson.loads(orjson.dumps(an_add(0.1).details()))
+    record["observations"][0]["extent"] = [None, None, None]
+    with write_transaction(container.engine) as connection:
+        head = connection.execute(
+            sa.select(scenes_table.c.head_seq).where(scenes_table.c.id == scene_id)
+        ).scalar_one()
+        connection.execute(
+            events_table.insert().values(
+                scene_id=scene_id,
+                seq=head + 1,
+                type="add",
+                track_id="trk-000099",
+                state="tentative",
+                batch_id="old-poison",
+                frame_id="f0",
+                recorded_at=0.0,
+                details=orjson.dumps(record).decode(),
+            )
+        )
+        connection.execute(
+            sa.update(scenes_table).where(scenes_table.c.id == scene_id).values(head_seq=head + 1)
+        )
+    return int(head + 1)
+
+
+def test_an_unreadable_event_is_a_409_and_repair_rebuilds_the_scene(
+    client: TestClient, container: Container
+) -> None:
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0")
+    Worker(container).drain()
+    bad_seq = poison_the_log(container, scene_id)
+    post(client, scene_id, "b1")  # accepted before anyone noticed; its worker dies on the state
+    response = client.get(f"/v1/scenes/{scene_id}/graph")
+    assert response.status_code == 409 and response.json()["type"] == "/problems/scene-needs-repair"
+    assert f"event {bad_seq}" in response.json()["detail"]
+
+    report = repair_scene(container, scene_id)
+    assert report.bad_seq == bad_seq and report.new_scene_id is not None
+    assert (report.batches_done, report.batches_requeued) == (1, 1)
+    quarantined = client.get(f"/v1/scenes/{scene_id}/graph")
+    assert quarantined.status_code == 409 and report.new_scene_id in quarantined.json()["detail"]
+    assert client.get(f"/v1/scenes/{scene_id}/events").status_code == 200  # the evidence stays
+    assert client.post(f"/v1/scenes/{scene_id}/baselines").status_code == 409  # no more writes
+
+    Worker(container).drain()
+    new = report.new_scene_id
+    assert status(client, new, "b0")["status"] == "done"
+    assert status(client, new, "b1")["status"] == "done"
+    assert client.get(f"/v1/scenes/{new}/graph").status_code == 200
+    old_events = client.get(f"/v1/scenes/{scene_id}/events").json()["events"][1:bad_seq]
+    new_events = client.get(f"/v1/scenes/{new}/events").json()["events"][1:bad_seq]
+    assert [(e["seq"], e["type"], e["details"]) for e in old_events] == [
+        (e["seq"], e["type"], e["details"]) for e in new_events
+    ]
+    assert rebuild_scene(container.log, new).identical
+    assert repair_scene(container, new).healthy
