@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo serve test lint format openapi bench eval clean
+.PHONY: setup demo serve test lint format openapi bench eval soak fuzz clean
 
 setup: $(VENV)/.installed
 
@@ -41,6 +41,14 @@ bench: setup  ## the performance benchmarks (figures printed and written to benc
 	$(BIN)/python -m bench.bench_decide
 	$(BIN)/python -m bench.bench_store append --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
+	$(BIN)/python -m bench.bench_memory
+
+soak: setup  ## the long fault run: 40 SIGKILLs, a PostgreSQL restart, a poison batch (about 4 minutes)
+	$(BIN)/python -m tests.e2e.fault_run --kills 40 --postgres-restart --poison
+	$(BIN)/python -m tests.e2e.fault_run --kills 40 --sqlite
+
+fuzz: setup  ## schemathesis with 200 examples per operation (make test runs 15)
+	PBDAG_FUZZ_EXAMPLES=200 $(BIN)/pytest tests/service/test_schemathesis.py
 
 eval: setup  ## the paper's protocols on every shipped scenario, seeds 7 17 27 (about 20 minutes)
 	$(BIN)/pbdag eval dynamic --out evaluation/results/dynamic

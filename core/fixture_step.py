@@ -8,6 +8,7 @@ from core.events import FixtureEvidence, VoxelDetection
 from core.fixtures import (
     FixtureProposal,
     FixtureTrackView,
+    VoxelEvidence,
     associate_fixtures,
     fixture_proposals,
     kept_voxels,
@@ -32,22 +33,28 @@ class FixtureBatch:
 def fixture_batch(state: SceneState, batch: Batch, params: Params) -> FixtureBatch:
     """Add the batch's fixture evidence to the voxel map, cluster it and associate the clusters."""
     fixture_params = params.fixtures
-    evidence = [
-        item
-        for frame in batch.frames
-        for detection in frame.detections
-        if detection.kind == "fixture"
-        and (
-            item := voxel_evidence(
+    evidence: list[VoxelEvidence] = []
+    budget = fixture_params.max_voxels_per_batch
+    points = fixture_params.max_points_per_batch
+    for frame in batch.frames:
+        for detection in frame.detections:
+            if detection.kind != "fixture":
+                continue
+            points -= detection.mask.area // fixture_params.mask_pixel_stride**2
+            if points < 0 or budget <= 0:
+                break
+            item = voxel_evidence(
                 detection,
                 frame,
                 fixture_params,
                 params.visibility.min_range_m,
                 params.visibility.max_range_m,
             )
-        )
-        is not None
-    ]
+            # Masks past the batch's voxel budget add nothing: a batch's evidence (and its
+            # event) stays bounded whatever the detector sent, and the order decides which.
+            if item is not None and item.voxels.size <= budget:
+                evidence.append(item)
+                budget -= item.voxels.size
     result = FixtureBatch()
     if not evidence:
         return result

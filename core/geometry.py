@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from core.masks import Mask
 from core.observation import Detection, DetectionKind, Frame, Intrinsics
 from core.params import ProposalParams
 
@@ -52,22 +53,27 @@ def world_to_camera(points: FloatArray, pose: FloatArray) -> FloatArray:
 
 
 def interior_pixels(
+    mask: Mask | npt.NDArray[np.bool_],
     mask_index: npt.NDArray[np.intp],
     flat_index: npt.NDArray[np.intp],
     width: int,
     erosion_px: int,
 ) -> npt.NDArray[np.intp]:
-    """Flat indices of the mask (`mask_index`) eroded by `erosion_px`, on the bounding box of
-    `flat_index` only (both sorted, C-order)."""
+    """Flat indices of the mask eroded by `erosion_px`, on the bounding box of `flat_index` only
+    (sorted, C-order). `mask` is decoded already (an array) or not (then `mask_index` builds
+    the box's pixels)."""
     if flat_index.size == 0 or erosion_px <= 0:
         return flat_index
     r0, r1 = int(flat_index[0] // width), int(flat_index[-1] // width) + 1
     cols = flat_index % width
     c0, c1 = int(cols.min()), int(cols.max()) + 1
-    rows_all, cols_all = np.divmod(mask_index, width)
-    inside = (rows_all >= r0) & (rows_all < r1) & (cols_all >= c0) & (cols_all < c1)
-    crop = np.zeros((r1 - r0, c1 - c0), dtype=bool)
-    crop[rows_all[inside] - r0, cols_all[inside] - c0] = True
+    if isinstance(mask, np.ndarray):
+        crop = mask[r0:r1, c0:c1]
+    else:
+        rows_all, cols_all = np.divmod(mask_index, width)
+        inside = (rows_all >= r0) & (rows_all < r1) & (cols_all >= c0) & (cols_all < c1)
+        crop = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+        crop[rows_all[inside] - r0, cols_all[inside] - c0] = True
     local_rows, local_cols = np.nonzero(erode_square(crop, erosion_px))
     flat: npt.NDArray[np.intp] = (local_rows + r0) * width + (local_cols + c0)
     return flat
@@ -116,22 +122,35 @@ def ground_detection(
     detection_index: int = -1,
 ) -> Proposal | None:
     """Back-project a mask's valid depth through (K, T); None when valid-depth support is too small."""
-    mask_index = detection.mask.flat_indices()
+    # A large mask is decoded whole (linear in the frame); a small one from its runs.
+    mask: Mask | npt.NDArray[np.bool_] = detection.mask
+    if detection.mask.area * 16 > detection.mask.height * detection.mask.width:
+        mask = detection.mask.to_array()
+        mask_index = np.flatnonzero(mask)
+    else:
+        mask_index = detection.mask.flat_indices()
     depth_m = frame.depth.reshape(-1)[mask_index].astype(np.float64)
     in_range = (depth_m >= min_range_m) & (depth_m <= max_range_m)
-    if int(in_range.sum()) < params.min_valid_depth_pixels:
+    valid = int(in_range.sum())
+    if valid < params.min_valid_depth_pixels:
         return None
+    # A large mask is sampled on a regular stride: its robust statistics barely change, and the
+    # work per mask is bounded (a batch may carry hundreds of full-frame masks).
+    stride = -(-valid // params.max_mask_samples)
     flat_index, depth_m = mask_index[in_range], depth_m[in_range]
     # Leakage sits on the mask's rim: anchor the median on the interior when it is large enough.
-    interior_depth = frame.depth.reshape(-1)[
-        interior_pixels(mask_index, flat_index, frame.intrinsics.width, params.boundary_erosion_px)
-    ]
+    interior_index = interior_pixels(
+        mask, mask_index, flat_index, frame.intrinsics.width, params.boundary_erosion_px
+    )
+    flat_index, depth_m = flat_index[::stride], depth_m[::stride]
+    interior_depth = frame.depth.reshape(-1)[interior_index[::stride]]
     interior: FloatArray = interior_depth[
         (interior_depth >= min_range_m) & (interior_depth <= max_range_m)
     ].astype(np.float64)
     reference = interior if interior.size >= params.min_interior_pixels else depth_m
     inliers = robust_depth_inliers(depth_m, reference, params)
-    if int(inliers.sum()) < params.min_valid_depth_pixels:
+    inlier_pixels = int(inliers.sum()) * stride  # estimated for a sampled mask
+    if inlier_pixels < params.min_valid_depth_pixels:
         return None
     points = camera_to_world(
         backproject_pixels(flat_index[inliers], depth_m[inliers], frame.intrinsics), frame.pose
@@ -153,7 +172,7 @@ def ground_detection(
         center=median,
         extent=extent,
         embedding=embedding,
-        valid_pixels=int(inliers.sum()),
+        valid_pixels=inlier_pixels,
         frame_id=frame.frame_id,
         timestamp=frame.timestamp,
         bottom_z=float(low[2]),

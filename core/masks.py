@@ -53,7 +53,14 @@ class Mask:
         return starts[keep], ends[keep]
 
     def flat_indices(self) -> npt.NDArray[np.intp]:
-        """Sorted C-order flat indices of the pixels set (work in proportion to the area)."""
+        """Sorted C-order flat indices of the pixels set.
+
+        A small mask is expanded from its runs (work in proportion to its area, then a sort); a
+        large one is decoded whole, which is linear in the frame and needs no sort.
+        """
+        if self.area * 16 > self.height * self.width:
+            dense: npt.NDArray[np.intp] = np.flatnonzero(self.to_array())
+            return dense
         starts, ends = self.intervals
         lengths = ends - starts
         offsets = np.arange(int(lengths.sum())) - np.repeat(np.cumsum(lengths) - lengths, lengths)

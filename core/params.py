@@ -58,6 +58,9 @@ class ProposalParams:
         Annotated[float, Field(ge=0.0, le=100.0)], Annotated[float, Field(ge=0.0, le=100.0)]
     ] = (5.0, 95.0)
     min_extent_m: PositiveMetres = 0.04
+    # Not in the paper: a mask with more valid-depth pixels than this is sampled on a stride
+    # (20,000 samples fix a median and 5/95 percentiles to well under a millimetre of depth).
+    max_mask_samples: Annotated[int, Field(ge=100, le=10_000_000)] = 20_000
 
     def __post_init__(self) -> None:
         if self.extent_percentiles[0] >= self.extent_percentiles[1]:
@@ -178,6 +181,14 @@ class FixtureParams:
     # Every 4th pixel of a fixture mask in each direction: at 6 m that is 4.6 cm, still inside
     # one 5 cm voxel, and it makes the map 16 times cheaper to feed.
     mask_pixel_stride: Annotated[int, Field(ge=1, le=64)] = 4
+    # Voxels one batch's fixture masks may add to the map. A 2 x 1 m table top seen at 5 cm is
+    # about 800 voxels, a whole room's furniture in one frame a few 10,000: the budget bounds the
+    # work and the event of a batch of hostile masks (flat noise depth), not real evidence.
+    max_voxels_per_batch: Annotated[int, Field(ge=1, le=10_000_000)] = 200_000
+    # Sampled mask points one batch's fixture masks may back-project (the work behind the
+    # voxels): 2,000,000 are 100 VGA fixture masks at the stride above, or 13 full masks of a
+    # 2.4 MP frame. Masks past it add nothing to the batch.
+    max_points_per_batch: Annotated[int, Field(ge=1, le=100_000_000)] = 2_000_000
     # A voxel is kept for class c when its mean similarity to c reaches the threshold of c and
     # beats every competing class by the margin.
     default_class_threshold: Similarity = 0.40

@@ -63,6 +63,8 @@ class InputLimits:
     max_embedding_length: int = 4096
     max_class_scores: int = 64
     max_label_length: int = 100
+    # The pixels all masks of a batch cover together: grounding works in proportion to them.
+    max_mask_pixels_per_batch: int = 40_000_000
 
 
 # A camera pose further than this from the world origin is a unit or frame error (voxel keys
@@ -91,7 +93,19 @@ def decode_frames(
         )
     for index, frame in enumerate(frames):
         _check_limits(frame, f"{path}[{index}]", limits)
-    return tuple(_decode_frame(frame, f"{path}[{index}]") for index, frame in enumerate(frames))
+    decoded = []
+    covered = 0
+    for index, frame in enumerate(frames):
+        decoded.append(_decode_frame(frame, f"{path}[{index}]"))
+        for number, detection in enumerate(decoded[-1].detections):
+            covered += detection.mask.area
+            if covered > limits.max_mask_pixels_per_batch:
+                raise InvalidObservation(
+                    f"{path}[{index}].detections[{number}].mask",
+                    f"the masks of the batch cover more than {limits.max_mask_pixels_per_batch} "
+                    "pixels together (PBDAG_MAX_MASK_PIXELS_PER_BATCH)",
+                )
+    return tuple(decoded)
 
 
 def _check_limits(frame: FrameIn, path: str, limits: InputLimits) -> None:

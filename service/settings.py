@@ -37,6 +37,9 @@ class Settings(SecuritySettings):
     max_embedding_length: int = Field(4096, ge=1, description="Values of one appearance embedding.")
     max_class_scores: int = Field(64, ge=1, description="Entries of one detection's class_scores.")
     max_label_length: int = Field(100, ge=1, le=200, description="Characters of a label.")
+    max_mask_pixels_per_batch: int = Field(
+        40_000_000, ge=1, description="Pixels all masks of a batch cover together."
+    )
     # Backpressure and quotas.
     max_queued_batches_per_scene: int = Field(
         256,
@@ -82,6 +85,7 @@ class Settings(SecuritySettings):
             max_embedding_length=self.max_embedding_length,
             max_class_scores=self.max_class_scores,
             max_label_length=self.max_label_length,
+            max_mask_pixels_per_batch=self.max_mask_pixels_per_batch,
         )
 
     def resolved_database_url(self) -> str:
