@@ -26,6 +26,13 @@ class PbdagError(Exception):
         self.headers = headers or {}
 
 
+class NotFound(PbdagError):
+    """A named resource (batch, track, baseline...) does not exist."""
+
+    def __init__(self, what: str, id: str, field: str | None = None) -> None:
+        super().__init__(f"{what} '{id}' does not exist", field)
+
+
 class DomainError(PbdagError):
     """A command that the scene's state does not allow; nothing is appended."""
 

@@ -5,19 +5,16 @@ stores them, and carries what `evolve` needs, so folding the log never recompute
 Every event has an envelope (the track it concerns, the lifecycle state after it, the frame it
 came from), stored in columns of its own; `details()` is the rest, as stored JSON.
 
-A few stored types hold more than one class, told apart by the payload itself (the stored JSON
-predates these classes and is kept byte for byte): `add` by its `kind`, `update` by its
-`evidence` and, for observations, by whether it carries a fixture's EMA `center`.
+The stored form (and how a stored row finds its class) is in core/event_records.py.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any, ClassVar, Literal
 
-from pydantic import ConfigDict, Field, TypeAdapter
+from pydantic import ConfigDict, Field
 
 from core.state import LifecycleState, Track, Vec3
 
@@ -50,9 +47,6 @@ __all__ = [
     "VerificationRequested",
     "VisibleMiss",
     "VoxelDetection",
-    "event_from_record",
-    "event_to_record",
-    "non_finite_field",
 ]
 
 # Only finite numbers are stored: a log with NaN or infinity could not be replayed.
@@ -119,17 +113,13 @@ class Event:
 
     def details(self) -> dict[str, Any]:
         """The payload as stored JSON (JSON-able values, in the stored key order)."""
-        result: dict[str, Any] = _adapter(type(self)).dump_python(
-            self, mode="json", by_alias=True, exclude=set(_ENVELOPE)
-        )
-        return result
+        from core.event_records import payload_of  # the stored form lives beside the classes
+
+        return payload_of(self)
 
     def touched_tracks(self) -> tuple[str, ...]:
         """Every track whose state the event changes."""
         return () if self.track_id is None else (self.track_id,)
-
-
-_ENVELOPE = frozenset({"track_id", "state", "frame_id"})
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -409,94 +399,3 @@ class InspectionRecorded(TrackEvent):
 
 # A positive observation of a track in a batch (isinstance accepts this union).
 Sighting = ObjectAdded | FixtureAdded | ObjectObserved | FixtureObserved
-
-
-# -- the stored form ---------------------------------------------------------------------------
-
-
-_ADAPTERS: dict[type[Event], TypeAdapter[Any]] = {}
-
-
-def _adapter(cls: type[Event]) -> TypeAdapter[Any]:
-    """pydantic's validator and serializer of one event class, built on first use."""
-    adapter = _ADAPTERS.get(cls)
-    if adapter is None:
-        adapter = _ADAPTERS[cls] = TypeAdapter(cls)
-    return adapter
-
-
-_SINGLE_CLASS: dict[str, type[Event]] = {
-    cls.type: cls
-    for cls in (
-        SceneCreated,
-        FixtureEvidence,
-        BaselineFrozen,
-        BaselineLoaded,
-        BatchSkipped,
-        TrackConfirmed,
-        TrackMoved,
-        TrackReparented,
-        TrackDemoted,
-        TrackRemoved,
-        VerificationRequested,
-        TrackVerified,
-        InspectionRecorded,
-    )
-}
-EVENT_TYPE_NAMES: tuple[str, ...] = (*sorted(_SINGLE_CLASS), "add", "update")
-
-
-def event_class(type_name: str, details: Mapping[str, Any]) -> type[Event]:
-    """The class of a stored event; ValueError for a type or payload no class describes."""
-    if type_name == "add":
-        return FixtureAdded if details.get("kind") == "fixture" else ObjectAdded
-    if type_name == "update":
-        if details.get("evidence") == "visible_miss":
-            return VisibleMiss
-        return FixtureObserved if "center" in details else ObjectObserved
-    cls = _SINGLE_CLASS.get(type_name)
-    if cls is None:
-        raise ValueError(f"unknown event type {type_name!r}")
-    return cls
-
-
-def event_from_record(record: Mapping[str, Any]) -> Event:
-    """An event from its stored form; pydantic's ValidationError names a bad payload field."""
-    details: Mapping[str, Any] = record.get("details") or {}
-    cls = event_class(record["type"], details)
-    values = {
-        **details,
-        "track_id": record.get("track_id"),
-        "state": record.get("state"),
-        "frame_id": record.get("frame_id"),
-    }
-    event: Event = _adapter(cls).validate_python(values)
-    return event
-
-
-def event_to_record(event: Event) -> dict[str, Any]:
-    """The stored form: type, envelope and the JSON-able payload."""
-    return {
-        "type": event.type,
-        "track_id": event.track_id,
-        "state": event.state,
-        "frame_id": event.frame_id,
-        "details": event.details(),
-    }
-
-
-def non_finite_field(value: Any, path: str = "details") -> str | None:
-    """The path of the first NaN or infinite number in a JSON-able value, or None."""
-    if isinstance(value, float):
-        return None if math.isfinite(value) else path
-    if isinstance(value, Mapping):
-        for key, item in value.items():
-            found = non_finite_field(item, f"{path}.{key}")
-            if found is not None:
-                return found
-    elif isinstance(value, list | tuple):
-        for index, item in enumerate(value):
-            found = non_finite_field(item, f"{path}[{index}]")
-            if found is not None:
-                return found
-    return None

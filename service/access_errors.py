@@ -1,4 +1,5 @@
-"""The errors of the LAN boundary: unknown Host, missing or bad token, missing scope, rate limit.
+"""The errors of the LAN boundary: unknown Host, missing or bad token, missing scope, rate limit,
+a body over the limit.
 
 Each carries the response headers HTTP asks for (WWW-Authenticate, Retry-After); their statuses
 are in the one problem table (service/errors.py).
@@ -54,3 +55,10 @@ class RateLimited(AccessProblem):
             {"Retry-After": str(retry_after)},
         )
         self.retry_after = retry_after
+
+
+class PayloadTooLarge(AccessProblem):
+    """The request body is larger than the service accepts."""
+
+    def __init__(self, max_bytes: int) -> None:
+        super().__init__(f"request body exceeds the limit of {max_bytes} bytes", "body")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import http
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,17 +18,24 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import Response
-from starlette.types import Send
+from starlette.types import Message, Send
 
 from core.errors import (
     InvalidCommand,
     InvalidParams,
+    NotFound,
     PbdagError,
     StateConflict,
     UnknownTrack,
     field_path,
 )
-from service.access_errors import Forbidden, HostNotAllowed, RateLimited, Unauthorized
+from service.access_errors import (
+    Forbidden,
+    HostNotAllowed,
+    PayloadTooLarge,
+    RateLimited,
+    Unauthorized,
+)
 from service.codec import InvalidObservation
 from service.store.errors import (
     BatchConflict,
@@ -42,20 +49,6 @@ from service.store.errors import (
 from service.store.queue import NotRequeueable, QueueFull, QuotaExceeded
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
-
-
-class NotFound(PbdagError):
-    """A named resource (batch, track, baseline...) does not exist."""
-
-    def __init__(self, what: str, id: str, field: str | None = None) -> None:
-        super().__init__(f"{what} '{id}' does not exist", field)
-
-
-class PayloadTooLarge(PbdagError):
-    """The request body is larger than the service accepts."""
-
-    def __init__(self, max_bytes: int) -> None:
-        super().__init__(f"request body exceeds the limit of {max_bytes} bytes", "body")
 
 
 @dataclass(frozen=True)
@@ -104,22 +97,6 @@ def problem_of(error: BaseException) -> Problem:
     return INTERNAL
 
 
-def problem_body(
-    problem: Problem, detail: str, field: str | None, errors: Iterable[tuple[str | None, str]] = ()
-) -> bytes:
-    """The problem document; every key is always present so clients parse one shape."""
-    return orjson.dumps(
-        {
-            "type": problem.type,
-            "title": problem.title,
-            "status": problem.status,
-            "detail": detail,
-            "field": field,
-            "errors": [{"field": name, "reason": reason} for name, reason in errors],
-        }
-    )
-
-
 def problem_response(
     problem: Problem,
     detail: str,
@@ -127,44 +104,42 @@ def problem_response(
     errors: Sequence[tuple[str | None, str]] | None = None,
     headers: dict[str, str] | None = None,
 ) -> Response:
-    """A problem+json response; `errors` defaults to the one field and detail."""
+    """A problem+json response, every key always present; `errors` defaults to the field."""
     listed = errors if errors is not None else [(field, detail)]
-    body = problem_body(problem, detail, field, listed)
+    body = orjson.dumps(
+        {
+            "type": problem.type,
+            "title": problem.title,
+            "status": problem.status,
+            "detail": detail,
+            "field": field,
+            "errors": [{"field": name, "reason": reason} for name, reason in listed],
+        }
+    )
     return Response(body, problem.status, headers=headers, media_type=PROBLEM_MEDIA_TYPE)
 
 
-def reported(error: PbdagError) -> tuple[Problem, str, str | None]:
-    """The problem, detail and field a client sees for `error` (nothing internal for a 500)."""
+def reported(error: PbdagError) -> Response:
+    """The answer to `error`: its table entry, detail, field and headers (nothing internal for
+    a 500: a store failure no client caused)."""
     problem = problem_of(error)
-    if problem is INTERNAL:  # a store failure no client caused: say nothing of internals
-        return INTERNAL, "the server failed to process the request", None
-    return problem, error.detail, error.field
+    if problem is INTERNAL:
+        return problem_response(INTERNAL, "the server failed to process the request")
+    return problem_response(problem, error.detail, error.field, headers=error.headers or None)
 
 
 async def send_problem(send: Send, error: PbdagError) -> None:
     """Answer with a problem+json document straight on the ASGI channel (from middleware)."""
-    problem, detail, field = reported(error)
-    body = problem_body(problem, detail, field, [(field, detail)])
-    extra = [(name.lower().encode(), value.encode()) for name, value in error.headers.items()]
-    await send(
-        {
-            "type": "http.response.start",
-            "status": problem.status,
-            "headers": [
-                (b"content-type", PROBLEM_MEDIA_TYPE.encode()),
-                (b"content-length", str(len(body)).encode()),
-                *extra,
-            ],
-        }
-    )
-    await send({"type": "http.response.body", "body": body})
+    await reported(error)({"type": "http"}, _nothing_to_receive, send)
+
+
+async def _nothing_to_receive() -> Message:
+    return {"type": "http.disconnect"}  # a response never reads the request
 
 
 async def _handle_reported(request: Request, exc: Exception) -> Response:
-    """Every PbdagError: its table entry, its detail and field, and its headers."""
     assert isinstance(exc, PbdagError)
-    problem, detail, field = reported(exc)
-    return problem_response(problem, detail, field, headers=exc.headers or None)
+    return reported(exc)
 
 
 INVALID_REQUEST = Problem(422, "Invalid request", "/problems/invalid-request")
@@ -204,23 +179,18 @@ async def _handle_http_exception(request: Request, exc: Exception) -> Response:
     if exc.status_code < 200 or exc.status_code in (204, 304):
         return Response(status_code=exc.status_code, headers=headers)  # no body allowed
     detail = exc.detail if isinstance(exc.detail, str) else json.dumps(exc.detail, default=str)
-    problem = Problem(exc.status_code, _phrase(exc.status_code), "about:blank")
-    return problem_response(problem, detail, headers=headers)
+    phrase = http.HTTPStatus(exc.status_code).phrase if exc.status_code in _STATUSES else "Error"
+    return problem_response(
+        Problem(exc.status_code, phrase, "about:blank"), detail, headers=headers
+    )
 
 
-def _phrase(status: int) -> str:
-    try:
-        return http.HTTPStatus(status).phrase
-    except ValueError:
-        return "Error"
+_STATUSES = frozenset(status.value for status in http.HTTPStatus)
 
 
 def install_problem_handlers(app: FastAPI) -> None:
-    """Make every error response of `app` an RFC 9457 problem+json document.
-
-    Exceptions outside these classes reach `service.middleware.unexpected`, which answers 500
-    without closing the connection.
-    """
+    """Every error response of `app` a problem+json document (other exceptions reach
+    `service.middleware.unexpected`, a 500 that keeps the connection)."""
     app.add_exception_handler(PbdagError, _handle_reported)
     app.add_exception_handler(RequestValidationError, _handle_request_validation)
     app.add_exception_handler(StarletteHTTPException, _handle_http_exception)

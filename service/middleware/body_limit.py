@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.errors import PayloadTooLarge, send_problem
+from service.access_errors import PayloadTooLarge
+from service.errors import send_problem
 
 
 class BodySizeLimit:

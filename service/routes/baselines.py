@@ -8,10 +8,10 @@ from fastapi import APIRouter, Path, Query
 
 from api_schema import BaselineList, BaselinePackage, Delta
 from core.baseline import decide_freeze
+from core.errors import NotFound
 from core.events import BaselineFrozen
 from service.commands import run_command
 from service.deps import MAX_INT, ContainerDep, SceneDep
-from service.errors import NotFound
 from service.store.baselines import StoredPackage, list_packages, read_package
 from service.wire import event_out, package_out, package_summary
 

@@ -8,10 +8,10 @@ from typing import Annotated
 from fastapi import APIRouter, Path, Response
 
 from api_schema import BatchIn, BatchStatus
+from core.errors import NotFound
 from service.auth import RequireAdmin
 from service.codec import canonical_json, decode_batch
 from service.deps import ContainerDep, SceneDep, admission
-from service.errors import NotFound
 from service.wire import batch_out
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}/batches", tags=["batches"])

@@ -5,11 +5,11 @@ from __future__ import annotations
 from fastapi import APIRouter
 
 from api_schema import Scene, SceneCreate, SceneList
+from core.errors import NotFound
 from core.events import BaselineSource
 from core.params import Params
 from service.commands import create_scene
 from service.deps import AnySceneDep, ContainerDep
-from service.errors import NotFound
 from service.store.baselines import read_package
 from service.wire import scene_out
 

@@ -7,9 +7,9 @@ from typing import Annotated
 from fastapi import APIRouter, Query
 
 from api_schema import Explanation, TrackBelief
+from core.errors import NotFound
 from core.state import LifecycleState
 from service.deps import AsOf, ContainerDep, SceneDep, StatesDep, TrackId, text_query
-from service.errors import NotFound
 from service.explain import explain
 from service.store.projection import query_tracks
 from service.wire import belief_out

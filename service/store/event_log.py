@@ -18,7 +18,8 @@ import pydantic
 import sqlalchemy as sa
 
 from core.errors import field_path
-from core.events import BaselineSource, Event, SceneCreated, event_from_record, non_finite_field
+from core.event_records import event_from_record, non_finite_field
+from core.events import BaselineSource, Event, SceneCreated
 from core.evolve import fold
 from core.params import Params
 from core.state import SNAPSHOT_FORMAT_VERSION, SceneState

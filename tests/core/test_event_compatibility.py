@@ -11,7 +11,8 @@ from typing import Any
 import orjson
 import pytest
 
-from core.events import Event, event_from_record, event_to_record
+from core.event_records import event_from_record, event_to_record
+from core.events import Event
 from core.evolve import fold
 from core.state import SceneState
 

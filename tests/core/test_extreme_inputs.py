@@ -11,7 +11,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from core.decide import decide
-from core.events import SceneCreated, event_from_record, event_to_record, non_finite_field
+from core.event_records import event_from_record, event_to_record, non_finite_field
+from core.events import SceneCreated
 from core.evolve import evolve, fold
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics

@@ -10,7 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from core.decide import decide
-from core.events import SceneCreated, event_from_record, event_to_record
+from core.event_records import event_from_record, event_to_record
+from core.events import SceneCreated
 from core.evolve import evolve, fold
 from core.params import Params
 from core.state import SceneState

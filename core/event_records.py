@@ -1,0 +1,134 @@
+"""The stored form of events: type, envelope and payload, and back (core/events.py has the classes).
+
+A few stored types hold more than one class, told apart by the payload itself (the stored JSON
+predates the typed classes and is kept byte for byte): `add` by its `kind`, `update` by its
+`evidence` and, for observations, by whether it carries a fixture's EMA `center`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from pydantic import TypeAdapter
+
+from core.events import (
+    BaselineFrozen,
+    BaselineLoaded,
+    BatchSkipped,
+    Event,
+    FixtureAdded,
+    FixtureEvidence,
+    FixtureObserved,
+    InspectionRecorded,
+    ObjectAdded,
+    ObjectObserved,
+    SceneCreated,
+    TrackConfirmed,
+    TrackDemoted,
+    TrackMoved,
+    TrackRemoved,
+    TrackReparented,
+    TrackVerified,
+    VerificationRequested,
+    VisibleMiss,
+)
+
+ENVELOPE = frozenset({"track_id", "state", "frame_id"})
+
+
+def payload_of(event: Event) -> dict[str, Any]:
+    """The payload of `event` as stored JSON (JSON-able values, in the stored key order)."""
+    result: dict[str, Any] = _adapter(type(event)).dump_python(
+        event, mode="json", by_alias=True, exclude=set(ENVELOPE)
+    )
+    return result
+
+
+_ADAPTERS: dict[type[Event], TypeAdapter[Any]] = {}
+
+
+def _adapter(cls: type[Event]) -> TypeAdapter[Any]:
+    """pydantic's validator and serializer of one event class, built on first use."""
+    adapter = _ADAPTERS.get(cls)
+    if adapter is None:
+        adapter = _ADAPTERS[cls] = TypeAdapter(cls)
+    return adapter
+
+
+_SINGLE_CLASS: dict[str, type[Event]] = {
+    cls.type: cls
+    for cls in (
+        SceneCreated,
+        FixtureEvidence,
+        BaselineFrozen,
+        BaselineLoaded,
+        BatchSkipped,
+        TrackConfirmed,
+        TrackMoved,
+        TrackReparented,
+        TrackDemoted,
+        TrackRemoved,
+        VerificationRequested,
+        TrackVerified,
+        InspectionRecorded,
+    )
+}
+EVENT_TYPE_NAMES: tuple[str, ...] = (*sorted(_SINGLE_CLASS), "add", "update")
+
+
+def event_class(type_name: str, details: Mapping[str, Any]) -> type[Event]:
+    """The class of a stored event; ValueError for a type or payload no class describes."""
+    if type_name == "add":
+        return FixtureAdded if details.get("kind") == "fixture" else ObjectAdded
+    if type_name == "update":
+        if details.get("evidence") == "visible_miss":
+            return VisibleMiss
+        return FixtureObserved if "center" in details else ObjectObserved
+    cls = _SINGLE_CLASS.get(type_name)
+    if cls is None:
+        raise ValueError(f"unknown event type {type_name!r}")
+    return cls
+
+
+def event_from_record(record: Mapping[str, Any]) -> Event:
+    """An event from its stored form; pydantic's ValidationError names a bad payload field."""
+    details: Mapping[str, Any] = record.get("details") or {}
+    cls = event_class(record["type"], details)
+    values = {
+        **details,
+        "track_id": record.get("track_id"),
+        "state": record.get("state"),
+        "frame_id": record.get("frame_id"),
+    }
+    event: Event = _adapter(cls).validate_python(values)
+    return event
+
+
+def event_to_record(event: Event) -> dict[str, Any]:
+    """The stored form: type, envelope and the JSON-able payload."""
+    return {
+        "type": event.type,
+        "track_id": event.track_id,
+        "state": event.state,
+        "frame_id": event.frame_id,
+        "details": event.details(),
+    }
+
+
+def non_finite_field(value: Any, path: str = "details") -> str | None:
+    """The path of the first NaN or infinite number in a JSON-able value, or None."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else path
+    if isinstance(value, Mapping):
+        for key, item in value.items():
+            found = non_finite_field(item, f"{path}.{key}")
+            if found is not None:
+                return found
+    elif isinstance(value, list | tuple):
+        for index, item in enumerate(value):
+            found = non_finite_field(item, f"{path}[{index}]")
+            if found is not None:
+                return found
+    return None
