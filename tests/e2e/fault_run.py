@@ -19,6 +19,7 @@ import os
 import random
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -67,8 +68,7 @@ class FaultReport:
 
 
 def free_port() -> int:
-    import socket
-
+    """A free TCP port on loopback."""
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
@@ -109,6 +109,7 @@ class Fleet:
 
 
 def wait_healthy(url: str, timeout: float = 60.0) -> None:
+    """Poll /healthz until it answers."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         try:

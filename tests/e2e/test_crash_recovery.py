@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -20,23 +19,12 @@ from service.settings import Settings
 from service.worker import Worker
 from tests.clients import local_client
 from tests.conftest import store_backends
+from tests.e2e.fault_run import free_port, wait_healthy
 from tests.e2e.simworld import WORLD, batch
 
 BATCHES = 20
 PBDAG = [sys.executable, "-m", "service.cli"]
 REPO = Path(__file__).resolve().parents[2]
-
-
-def stream():
-    """20 one-frame batches: the mug is seen, then taken away."""
-    empty = WORLD.without("mug")
-    return [batch(f"b{i:02d}", WORLD if i < 8 else empty, i) for i in range(BATCHES)]
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
 
 
 def start(args, env, log: Path) -> subprocess.Popen:
@@ -46,16 +34,10 @@ def start(args, env, log: Path) -> subprocess.Popen:
         )
 
 
-def wait_healthy(url: str, timeout: float = 60.0) -> None:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            if httpx.get(f"{url}/healthz", timeout=1.0).status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        time.sleep(0.1)
-    raise AssertionError(f"{url} did not become healthy")
+def stream():
+    """20 one-frame batches: the mug is seen, then taken away."""
+    empty = WORLD.without("mug")
+    return [batch(f"b{i:02d}", WORLD if i < 8 else empty, i) for i in range(BATCHES)]
 
 
 def outcome(client, scene_id):

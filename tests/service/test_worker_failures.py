@@ -5,6 +5,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from typing import Any
 
 import orjson
@@ -12,7 +13,7 @@ import pytest
 import sqlalchemy as sa
 from fastapi.testclient import TestClient
 
-from core.events import Event, ObjectAdded, Observation
+from core.events import Event, ObjectAdded
 from core.observation import Batch
 from core.state import SceneState
 from service.app import create_app
@@ -25,6 +26,7 @@ from service.store.tables import scenes as scenes_table
 from service.worker import Worker
 from tests.clients import local_client
 from tests.service.test_codec import batch_body, frame_body
+from tests.service.test_store_contract import added
 
 
 @pytest.fixture
@@ -50,28 +52,10 @@ def status(client: TestClient, scene_id: str, batch_id: str) -> dict[str, Any]:
 
 
 def an_add(extent_x: float) -> ObjectAdded:
-    return ObjectAdded(
-        track_id="trk-000001",
-        state="tentative",
-        frame_id="f0",
-        observations=(
-            Observation(
-                frame_id="f0",
-                label="mug",
-                score=0.9,
-                center=(0.0, 0.0, 1.0),
-                extent=(extent_x, 0.1, 0.1),
-                valid_pixels=100,
-                parent=None,
-            ),
-        ),
-        embedding_sum=None,
-        embedding_count=0,
-        timestamp=0.0,
-        existence_logodds=1.0,
-        p_exist=0.73,
-        batches_observed=1,
-        parent_evidence={},
+    """A minimal add whose box is `extent_x` wide."""
+    return replace(
+        added("trk-000001"),
+        observations=(replace(added("trk-000001").observations[0], extent=(extent_x, 0.1, 0.1)),),
     )
 
 
