@@ -164,7 +164,7 @@ def recall_probability(factors: ViewFactors, spec: RecallSpec) -> float:
     grazing = GRAZING_FLOOR + (1.0 - GRAZING_FLOOR) * _ramp(factors.grazing_deg, spec.grazing_deg)
     truncation = max(0.0, 1.0 - factors.truncation / spec.truncation_zero)
     occlusion = _ramp(factors.visible_fraction, spec.visible_fraction)
-    return spec.peak * area * distance * grazing * truncation * occlusion
+    return float(spec.peak * area * distance * grazing * truncation * occlusion)
 
 
 class DetectorLuck:

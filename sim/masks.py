@@ -42,7 +42,8 @@ def bleed(mask: np.ndarray, onto: np.ndarray, bleed_px: int) -> np.ndarray:
     """The mask grown by `bleed_px` pixels, but only over the pixels of `onto` (a neighbour)."""
     if bleed_px <= 0 or not mask.any():
         return mask
-    return mask | (leak(mask, bleed_px) & onto)
+    grown: np.ndarray = mask | (leak(mask, bleed_px) & onto)
+    return grown
 
 
 def _along(mask: np.ndarray, angle: float) -> tuple[tuple[slice, slice], np.ndarray]:
