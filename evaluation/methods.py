@@ -22,11 +22,13 @@ IMMEDIATE = {"confirm_min_batches": 1, "confirm_min_p_exist": 0.5}
 FOREVER = 1.0e12  # an identity memory that only forgets removed tracks
 NO_SIZE_LIMIT = (0.0, 0.0, 0.0, 100.0, 100.0, 100.0)
 # Fixtures published on first sight: no consensus gate, no absorption of residual clusters.
+# Absorption cannot be switched off within the core's parameter ranges (fractions are at most 1);
+# 1.0 absorbs only a residual lying wholly inside a matched fixture's expanded footprint.
 UNVERIFIED_FIXTURES = {
     "confirm_min_batches": 1,
     "consensus_min_agreement": 0.0,
     "consensus_min_margin": 0.0,
-    "residual_containment": 2.0,
+    "residual_containment": 1.0,
 }
 
 
@@ -169,7 +171,9 @@ FIXTURE_METHODS: tuple[Method, ...] = (
         params={
             "fixtures": {
                 **UNVERIFIED_FIXTURES,
-                "min_expanded_coverage": 2.0,
+                # Footprint overlap only: coverage counts only when the proposal lies wholly
+                # inside the expanded footprint (1.0, the top of the core's range).
+                "min_expanded_coverage": 1.0,
                 "default_size_limits": list(NO_SIZE_LIMIT),
                 "size_limits": {
                     label: list(NO_SIZE_LIMIT) for label in FixtureParams().size_limits

@@ -5,10 +5,17 @@ from __future__ import annotations
 import pytest
 
 from core.events import ObjectAdded, Observation, TrackRemoved
+from core.params import Params
 from core.rules import UpdateRules
 from core.state import SceneState, Track
 from evaluation.conceptgraphs import ConceptGraphsHooks, contained_share
-from evaluation.methods import DYNAMIC_METHODS, Method, MethodUnavailable, method_named
+from evaluation.methods import (
+    DYNAMIC_METHODS,
+    FIXTURE_METHODS,
+    Method,
+    MethodUnavailable,
+    method_named,
+)
 
 DIM = 4
 
@@ -93,6 +100,11 @@ def test_a_method_needing_a_rule_the_core_lacks_is_unavailable_not_replaced() ->
     assert gated.rules == UpdateRules(visibility_gate=False)
     assert method_named("pbd-ag").rules == UpdateRules()
     assert not method_named("PBD-AG").changes_the_loop and gated.changes_the_loop
+
+
+def test_every_method_s_parameters_are_valid_for_this_core() -> None:
+    for method in DYNAMIC_METHODS + FIXTURE_METHODS:
+        Params.from_dict(method.params)  # raises InvalidParams naming the field
 
 
 def test_dynamem_asks_the_core_for_free_space_misses() -> None:
