@@ -103,6 +103,7 @@ def test_a_saved_run_loads_back_equal(tmp_path: Path) -> None:
     loaded = load_run(tmp_path / "cache")
     assert loaded.scenario == run.scenario and loaded.scenario_sha256 == run.scenario_sha256
     assert loaded.fixtures == run.fixtures and loaded.events == run.events
+    assert loaded.observable_frames == run.observable_frames
     for first, second in zip(run.frames, loaded.frames, strict=True):
         assert np.array_equal(first.depth, second.depth) and np.array_equal(first.pose, second.pose)
         assert first.truth == second.truth and first.camera == second.camera
