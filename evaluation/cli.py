@@ -7,10 +7,14 @@ from pathlib import Path
 
 from sim import SCENARIOS_DIR
 
-DEFAULT_SCENARIOS = {
-    "dynamic": ["hotel-suite.yaml", "bedroom.yaml", "office.yaml", "kitchen-real.yaml"],
-    "fixtures": ["hotel-suite.yaml", "bedroom.yaml", "office.yaml", "kitchen-real.yaml"],
-}
+SHIPPED = [
+    "hotel-suite.yaml",
+    "bedroom.yaml",
+    "office.yaml",
+    "kitchen-real.yaml",
+    "busy-living-room.yaml",
+]
+DEFAULT_SCENARIOS = {"dynamic": SHIPPED, "fixtures": SHIPPED}
 
 
 def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -47,6 +51,9 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
         parser.add_argument(
             "--token", help="bearer token for --via-service (default: $PBDAG_TOKEN)"
         )
+        parser.add_argument(
+            "--frames", type=int, help="shorten every scenario to N frames (same story, faster)"
+        )
         parser.add_argument("--quiet", action="store_true", help="no progress bar")
         parser.set_defaults(handler=run)
 
@@ -60,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
 
     from evaluation.methods import DYNAMIC_METHODS, FIXTURE_METHODS, method_named
     from evaluation.protocols import run_protocol
-    from evaluation.report import table, write_report
+    from evaluation.report import write_report
+    from evaluation.tables import console_summary
 
     protocol = args.protocol
     scenarios = args.scenario or [SCENARIOS_DIR / name for name in DEFAULT_SCENARIOS[protocol]]
@@ -82,13 +90,19 @@ def run(args: argparse.Namespace) -> int:
     )
     try:
         rows = run_protocol(
-            protocol, scenarios, args.seeds, methods, via_service=client, progress=not args.quiet
+            protocol,
+            scenarios,
+            args.seeds,
+            methods,
+            via_service=client,
+            progress=not args.quiet,
+            frames=args.frames,
         )
     finally:
         if client is not None:
             client.close()
     written = write_report(protocol, rows, args.out, args.seeds)
-    print(table(protocol, rows))
+    print(console_summary(protocol, rows))
     for path in written:
         print(f"wrote {path}")
     return 0

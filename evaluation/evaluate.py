@@ -15,11 +15,11 @@ import httpx
 
 from api_schema import BatchIn
 from core.decide import decide
-from core.events import Event, SceneCreated, Sighting, TrackReparented
+from core.events import Event, SceneCreated, TrackReparented
 from core.evolve import evolve, fold
 from core.graph import is_published
 from core.params import Params
-from core.state import SceneState
+from core.state import SceneState, Track
 from evaluation.methods import Method
 from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
 from service.codec import decode_batch
@@ -40,13 +40,13 @@ class MethodRun:
 
 
 def nodes_of(
-    state: SceneState, prefix: str = "", observed: set[str] | None = None
+    state: SceneState, prefix: str = "", publishable: Callable[[Track], bool] | None = None
 ) -> tuple[PredictedNode, ...]:
-    """The published graph as prediction nodes (optionally only the tracks observed last batch)."""
+    """The published graph as prediction nodes (optionally filtered by a method's hook)."""
     nodes = []
     for track_id in sorted(state.tracks):
         track = state.tracks[track_id]
-        if not is_published(track) or (observed is not None and track_id not in observed):
+        if not is_published(track) or (publishable is not None and not publishable(track)):
             continue
         parent = None if track.parent is None else prefix + track.parent
         nodes.append(
@@ -116,6 +116,8 @@ def run_in_process(
 ) -> MethodRun:
     """The method's rules on the shared loop: decode like the service, decide, fold, publish."""
     started = time.perf_counter()
+    rules = method.rules  # raises MethodUnavailable before any work
+    hooks = method.hooks() if method.hooks is not None else None
     params = Params.from_dict(method.params)
     created = SceneCreated(name=method.name, params=params.to_dict())
     fresh = evolve(SceneState(), created)
@@ -130,16 +132,19 @@ def run_in_process(
     for last_frame, body in batches:
         if method.reset_every_frames and last_frame - epoch_start >= method.reset_every_frames:
             state, epoch, epoch_start = fresh, epoch + 1, last_frame  # a remap forgets everything
+            hooks = method.hooks() if method.hooks is not None else None
         prefix = f"r{epoch}-" if method.reset_every_frames else ""
         if freeze_at is not None and last_frame >= freeze_at:
             recorder.batch(last_frame, recorder.last, [])  # the static map no longer changes
             continue
         batch = decode_batch(BatchIn.model_validate(body))
-        events = decide(state, batch, params, method.rules)
+        events = decide(state, batch, params, rules)
         state = fold(state, events)
-        if method.publish_last_batch_only:
-            observed = {e.track_id for e in events if isinstance(e, Sighting)}
-            nodes = nodes_of(state, prefix, observed)
+        if hooks is not None:
+            # The baseline's own maintenance, folded like the core's events; its graph is
+            # filtered, so its typed events are the differences between published graphs.
+            state = fold(state, hooks.after_batch(state, events, last_frame))
+            nodes = nodes_of(state, prefix, hooks.publishable)
             recorder.batch(last_frame, nodes, graph_events(last_frame, recorder.last, nodes))
         else:
             recorder.batch(last_frame, nodes_of(state, prefix), stamp(last_frame, events, prefix))
@@ -156,11 +161,7 @@ def run_via_service(
     timeout_s: float = 120.0,
 ) -> MethodRun:
     """PBD-AG through the HTTP API: post each batch, wait for it, read its events and the graph."""
-    if (
-        method.rules != Method("x", "x").rules
-        or method.publish_last_batch_only
-        or method.reset_every_frames
-    ):
+    if method.changes_the_loop:
         raise ValueError(
             f"{method.name} changes the update rules; only parameter variants run through the API"
         )

@@ -1,28 +1,39 @@
 """The methods compared on identical streams: PBD-AG, inspired baselines, alternative rules, ablations.
 
-Each is the same `core.decide` loop with other parameters, other update rules, or another
-runner hook (publication, periodic reset, freezing). None of them changes the core's code.
+Each is the same `core.decide` loop with other parameters, other update rules (`core.rules`),
+or a runner hook (periodic maintenance and a publication filter, periodic reset, freezing).
+None of them changes the core's code. evaluation/README.md cites where each rule comes from.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from core.params import FixtureParams
-from core.rules import PAPER_RULES, UpdateRules
+from core.rules import UpdateRules
+from evaluation.conceptgraphs import ConceptGraphsHooks
+from evaluation.hooks import RunnerHooks
 
 # Publish on the first sighting: one batch and p_exist 0.73 after eta_o suffice.
 IMMEDIATE = {"confirm_min_batches": 1, "confirm_min_p_exist": 0.5}
 FOREVER = 1.0e12  # an identity memory that only forgets removed tracks
 NO_SIZE_LIMIT = (0.0, 0.0, 0.0, 100.0, 100.0, 100.0)
 # Fixtures published on first sight: no consensus gate, no absorption of residual clusters.
+# Absorption cannot be switched off within the core's parameter ranges (fractions are at most 1);
+# 1.0 absorbs only a residual lying wholly inside a matched fixture's expanded footprint.
 UNVERIFIED_FIXTURES = {
     "confirm_min_batches": 1,
     "consensus_min_agreement": 0.0,
     "consensus_min_margin": 0.0,
-    "residual_containment": 2.0,
+    "residual_containment": 1.0,
 }
+
+
+class MethodUnavailable(RuntimeError):
+    """A method whose update rule this core does not offer yet."""
 
 
 @dataclass(frozen=True)
@@ -32,12 +43,35 @@ class Method:
     name: str
     description: str  # two sentences: the rule it isolates, and the system it comes from
     params: dict[str, Any] = field(default_factory=dict)
-    rules: UpdateRules = PAPER_RULES
-    publish_last_batch_only: bool = False  # the graph is what the last batch saw
+    # Fields of core.rules.UpdateRules; a field this core lacks makes the method unavailable
+    # (it is skipped with that reason) instead of silently running another rule.
+    rule_flags: Mapping[str, Any] = field(default_factory=dict)
     reset_every_frames: int | None = None  # online remap: memory rebuilt from scratch
-    freeze_after_fraction: float | None = (
-        None  # static-only: the first part of the run, then nothing
-    )
+    freeze_after_fraction: float | None = None  # static-only: the first part, then nothing
+    hooks: Callable[[], RunnerHooks] | None = None  # per-run maintenance and publication filter
+
+    def unavailable_reason(self) -> str | None:
+        """Why this core cannot run the method, None when it can."""
+        known = {rule.name for rule in dataclasses.fields(UpdateRules)}
+        missing = sorted(set(self.rule_flags) - known)
+        if missing:
+            return f"core.rules.UpdateRules has no field {', '.join(missing)} yet"
+        return None
+
+    @property
+    def rules(self) -> UpdateRules:
+        """The update rules, built from the flags (raises MethodUnavailable when it cannot)."""
+        reason = self.unavailable_reason()
+        if reason is not None:
+            raise MethodUnavailable(f"{self.name}: {reason}")
+        return UpdateRules(**self.rule_flags)
+
+    @property
+    def changes_the_loop(self) -> bool:
+        """Whether the method needs the in-process loop (the HTTP API runs only parameters)."""
+        return bool(
+            self.rule_flags or self.hooks or self.reset_every_frames or self.freeze_after_fraction
+        )
 
 
 DYNAMIC_METHODS: tuple[Method, ...] = (
@@ -49,8 +83,9 @@ DYNAMIC_METHODS: tuple[Method, ...] = (
     Method(
         "DynaMem-inspired",
         "Isolates DynaMem's update rule: objects are published on first sight and cleared as soon as "
-        "depth shows free space where they were. Identities are not kept across a removal (a voxel "
-        "memory has no object identity), and there is no unique-class recovery.",
+        "depth shows free space where they were (a miss counts only when the measured depth at the "
+        "box samples lies beyond the expected depth plus the margin). A voxel memory keeps no "
+        "identity across a removal, and there is no unique-class recovery.",
         params={
             "lifecycle": {
                 **IMMEDIATE,
@@ -60,33 +95,37 @@ DYNAMIC_METHODS: tuple[Method, ...] = (
             },
             "association": {"unique_class_fallback": False},
         },
-        rules=UpdateRules(identity_memory_s=FOREVER),
+        # Assumed core rule (added on main by the core engineer): UpdateRules.miss_evidence.
+        rule_flags={"identity_memory_s": FOREVER, "miss_evidence": "free_space"},
     ),
     Method(
         "ConceptGraphs-inspired",
-        "Isolates ConceptGraphs' incremental merging: each detection is merged into the nearest "
-        "same-class node with similar appearance or becomes a new node, published at once. The map is "
-        "built for a static scene, so nothing is ever removed and a far move leaves a stale node.",
+        "Isolates ConceptGraphs' mapping rules: detections merge into same-class nodes; a node is "
+        "published once detected 3 times; every 10 frames same-class nodes whose boxes overlap by "
+        "70 % with appearance cosine above 0.7 are merged, and nodes still below 3 detections "
+        "after a period are dropped. The map is static: unseen nodes are never removed.",
         params={"lifecycle": IMMEDIATE, "association": {"unique_class_fallback": False}},
-        rules=UpdateRules(removal=False),
+        rule_flags={"removal": False, "identity_memory_s": FOREVER},
+        hooks=ConceptGraphsHooks,
     ),
     Method(
         "Last observation",
-        "The graph is exactly what the last batch saw, with identities carried by association. "
-        "It isolates memory-less state estimation, the rule of frame-by-frame perception stacks.",
-        params={"lifecycle": IMMEDIATE},
-        publish_last_batch_only=True,
+        "A memory that only replaces what it sees again: every detection is published at once, a "
+        "node keeps the position, class and support of its latest matched observation, and a node "
+        "not seen again stays where it was last seen (nothing is ever removed).",
+        params={"lifecycle": IMMEDIATE, "association": {"unique_class_fallback": False}},
+        rule_flags={"removal": False},
     ),
     Method(
         "Append-only",
         "PBD-AG without removal: evidence of absence is recorded but never acted upon. It isolates "
         "the append-only map of reconstruction systems.",
-        rules=UpdateRules(removal=False),
+        rule_flags={"removal": False},
     ),
     Method(
         "Static-only",
-        "The memory built during the first loop of the run, frozen afterwards. It isolates a static "
-        "scene graph built once (a pre-mapped baseline without deltas).",
+        "The memory built during the first third of the run, frozen afterwards. It isolates a "
+        "static scene graph built once (a pre-mapped baseline without deltas).",
         freeze_after_fraction=1 / 3,
     ),
     Method(
@@ -99,14 +138,14 @@ DYNAMIC_METHODS: tuple[Method, ...] = (
         "w/o visibility gate",
         "PBD-AG where every unmatched track inside the image and the range takes a miss, occluded or "
         "not. The component ablation of the geometric visibility gate.",
-        rules=UpdateRules(visibility_gate=False),
+        rule_flags={"visibility_gate": False},
     ),
     Method(
         "w/o persistent ID",
         "PBD-AG where a track unseen for more than a second, or removed, can no longer be matched, and "
         "the unique-class fallback is off. The component ablation of persistent identity.",
         params={"association": {"unique_class_fallback": False}},
-        rules=UpdateRules(identity_memory_s=1.0),
+        rule_flags={"identity_memory_s": 1.0},
     ),
 )
 
@@ -132,7 +171,9 @@ FIXTURE_METHODS: tuple[Method, ...] = (
         params={
             "fixtures": {
                 **UNVERIFIED_FIXTURES,
-                "min_expanded_coverage": 2.0,
+                # Footprint overlap only: coverage counts only when the proposal lies wholly
+                # inside the expanded footprint (1.0, the top of the core's range).
+                "min_expanded_coverage": 1.0,
                 "default_size_limits": list(NO_SIZE_LIMIT),
                 "size_limits": {
                     label: list(NO_SIZE_LIMIT) for label in FixtureParams().size_limits

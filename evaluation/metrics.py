@@ -1,4 +1,5 @@
-"""Evaluation metrics: identity, presence, event recall, false absence and fixtures.
+"""Evaluation metrics: identity, presence and fixtures (event recall and false absence:
+`evaluation.change_metrics`).
 
 Object metrics take per-frame ground truth and the graph a method published after each frame,
 aligned by position (same length, same order). Only predicted nodes of kind "object" and ground
@@ -16,16 +17,8 @@ import motmetrics as mm
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
-from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject
-
-# The method event that shows a scheduled change was noticed, per scheduled event type.
-RECALLING_EVENT_TYPE = {
-    "appear": "confirm",
-    "move": "move",
-    "disappear": "remove",
-    "transfer": "reparent",
-}
+from evaluation.predictions import FramePrediction, PredictedNode
+from sim.truth import FrameTruth, TruthFixture, TruthObject
 
 
 @dataclass(frozen=True)
@@ -49,24 +42,6 @@ class PresenceScores:
     tp: int
     fp: int
     fn: int
-
-
-@dataclass(frozen=True)
-class EventRecall:
-    """How many scheduled world changes the method reflected, and which."""
-
-    recalled: int
-    total: int
-    per_event: list[tuple[ScheduledEvent, bool]]
-
-
-@dataclass(frozen=True)
-class FalseAbsence:
-    """How often an already published object's track is missing while the object is there."""
-
-    rate: float
-    absent: int
-    eligible: int
 
 
 @dataclass(frozen=True)
@@ -210,29 +185,36 @@ def presence_f1(
     truth: Sequence[FrameTruth],
     predictions: Sequence[FramePrediction],
     assignment: Mapping[str, str],
+    max_distance: float = 0.5,
 ) -> PresenceScores:
-    """Per-frame presence counts of assigned tracks, summed over frames (distance ignored).
+    """Per-frame presence of assigned tracks within `max_distance`, summed over frames (ID-Pres.).
 
-    At each frame: TP = present object whose assigned track is published; FN = present object
-    whose assigned track is not published, or that has no assigned track; FP = published track
-    that is not the assigned track of an object present at that frame. precision = TP/(TP+FP),
-    recall = TP/(TP+FN), f1 their harmonic mean (each 0.0 when undefined).
+    At each frame: TP = present object whose assigned track is published with its center at most
+    `max_distance` from the object's; FN = every other present object (its track unpublished,
+    published elsewhere, or no track assigned); FP = published track that is not the assigned
+    track of an object present at that frame (ghosts, duplicates, tracks of absent objects).
+    precision = TP/(TP+FP), recall = TP/(TP+FN), f1 their harmonic mean (each 0.0 when
+    undefined). Unlike IDF1, an object's own track published away from it costs one error (a
+    miss), not two: ID-Pres. asks whether each object is in the graph where it is, and how much
+    of the graph is nobody's.
     """
     if len(truth) != len(predictions):
         raise ValueError(f"{len(truth)} truth frames but {len(predictions)} prediction frames")
+    max_squared = max_distance**2
     tp = fp = fn = 0
     for frame_truth, frame_prediction in zip(truth, predictions, strict=True):
-        published = {node.track_id for node in published_objects(frame_prediction)}
+        centers = {node.track_id: node.center for node in published_objects(frame_prediction)}
         expected_tracks = set()
         for truth_object in present_objects(frame_truth):
             track_id = assignment.get(truth_object.object_id)
             if track_id is not None:
                 expected_tracks.add(track_id)
-            if track_id in published:
+            center = centers.get(track_id) if track_id is not None else None
+            if center is not None and squared_distance(center, truth_object.center) <= max_squared:
                 tp += 1
             else:
                 fn += 1
-        fp += len(published - expected_tracks)
+        fp += len(centers.keys() - expected_tracks)
     precision, recall = ratio(tp, tp + fp), ratio(tp, tp + fn)
     return PresenceScores(
         precision=precision,
@@ -242,78 +224,6 @@ def presence_f1(
         fp=fp,
         fn=fn,
     )
-
-
-def event_recall(
-    scheduled: Sequence[ScheduledEvent],
-    method_events: Sequence[MethodEvent],
-    assignment: Mapping[str, str],
-    fixture_map: Mapping[str, str],
-    n_frames: int,
-) -> EventRecall:
-    """Fraction of scheduled changes answered by the right method event of the object's track.
-
-    A scheduled event is recalled when the object's assigned track emits, at a frame f with
-    event.frame <= f < n_frames: appear -> "confirm"; move -> "move"; disappear -> "remove";
-    transfer -> "reparent" with details["new_parent"] equal to fixture_map[event.parent]. An
-    object without an assigned track, or a transfer to an unmatched fixture, is never recalled.
-    Identity is implicitly kept because the assignment holds one track per object throughout.
-    """
-    per_event: list[tuple[ScheduledEvent, bool]] = []
-    for event in scheduled:
-        if event.type not in RECALLING_EVENT_TYPE:
-            raise ValueError(f"unknown scheduled event type {event.type!r}")
-        track_id = assignment.get(event.object_id)
-        wanted_parent = fixture_map.get(event.parent) if event.parent is not None else None
-        recalled = False
-        if track_id is not None and (event.type != "transfer" or wanted_parent is not None):
-            recalled = any(
-                method_event.type == RECALLING_EVENT_TYPE[event.type]
-                and method_event.track_id == track_id
-                and event.frame <= method_event.frame < n_frames
-                and (
-                    event.type != "transfer"
-                    or method_event.details.get("new_parent") == wanted_parent
-                )
-                for method_event in method_events
-            )
-        per_event.append((event, recalled))
-    return EventRecall(
-        recalled=sum(recalled for _, recalled in per_event),
-        total=len(per_event),
-        per_event=per_event,
-    )
-
-
-def false_absence(
-    truth: Sequence[FrameTruth],
-    predictions: Sequence[FramePrediction],
-    assignment: Mapping[str, str],
-) -> FalseAbsence:
-    """Share of post-acquisition checkpoints at which a present object's track is not published.
-
-    A checkpoint (object, frame) is eligible when the object is present at that frame, has an
-    assigned track, and that track was published at some strictly earlier frame. absent counts
-    eligible checkpoints where the track is not published; rate = absent / eligible (0.0 when
-    nothing is eligible).
-    """
-    if len(truth) != len(predictions):
-        raise ValueError(f"{len(truth)} truth frames but {len(predictions)} prediction frames")
-    published_per_frame = [
-        {node.track_id for node in published_objects(frame_prediction)}
-        for frame_prediction in predictions
-    ]
-    acquired_tracks: set[str] = set()
-    absent = eligible = 0
-    for frame_truth, published in zip(truth, published_per_frame, strict=True):
-        for truth_object in present_objects(frame_truth):
-            track_id = assignment.get(truth_object.object_id)
-            if track_id in acquired_tracks:
-                eligible += 1
-                absent += track_id not in published
-        # Updated after the checks: acquisition counts only from the NEXT frame on.
-        acquired_tracks |= published & set(assignment.values())
-    return FalseAbsence(rate=ratio(absent, eligible), absent=absent, eligible=eligible)
 
 
 def fixture_scores(

@@ -11,16 +11,10 @@ from typing import Any
 import httpx
 from tqdm import tqdm
 
+from evaluation.change_metrics import class_false_absence, event_recall, false_absence
 from evaluation.evaluate import MethodRun, WireBatch, run_in_process, run_via_service
 from evaluation.methods import Method
-from evaluation.metrics import (
-    event_recall,
-    false_absence,
-    fixture_scores,
-    global_assignment,
-    identity_metrics,
-    presence_f1,
-)
+from evaluation.metrics import fixture_scores, global_assignment, identity_metrics, presence_f1
 from sim.scenario import load_scenario
 from sim.stream import SimRun, simulate, wire_batches
 from sim.truth import FrameTruth
@@ -37,26 +31,27 @@ class Stream:
     batches: tuple[WireBatch, ...]
 
 
-def make_stream(path: Path, seed: int) -> Stream:
-    """Simulate a scenario once per seed; every method then reads the same batches."""
-    run = simulate(load_scenario(path), seed)
+def make_stream(path: Path, seed: int, frames: int | None = None) -> Stream:
+    """Simulate a scenario once per seed (optionally shortened); every method reads its batches."""
+    run = simulate(load_scenario(path, frames=frames), seed)
     return Stream(path, run, tuple(wire_batches(run, FRAMES_PER_BATCH)))
 
 
-def acquired_truth(run: SimRun, min_visible_pixels: int) -> list[FrameTruth]:
-    """Ground truth a memory can be judged on: an object counts from its first sighting on.
+def acquired_truth(run: SimRun) -> list[FrameTruth]:
+    """Ground truth a memory can be judged on: an object counts from its first detection on.
 
-    An object the camera has not yet seen well enough to detect cannot be in any memory; it is
-    listed as not present until then (and after it disappears, as the simulator says).
+    No memory can hold an object its detector never reported, so an object is listed as not
+    present until the frame of its first (true) detection, and after it disappears, as the
+    simulator says. Detections of phantoms, people and false-positive blobs acquire nothing.
     """
     seen: set[str] = set()
     frames = []
     for sim_frame in run.frames:
-        objects = []
-        for obj in sim_frame.truth.objects:
-            if obj.present and obj.visible_pixels >= min_visible_pixels:
-                seen.add(obj.object_id)
-            objects.append(replace(obj, present=obj.present and obj.object_id in seen))
+        seen |= {d.object_id for d in sim_frame.detections if d.kind == "object"}
+        objects = [
+            replace(obj, present=obj.present and obj.object_id in seen)
+            for obj in sim_frame.truth.objects
+        ]
         frames.append(FrameTruth(sim_frame.truth.frame_index, tuple(objects)))
     return frames
 
@@ -71,37 +66,82 @@ def run_method(
 
 
 def dynamic_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
-    """Table 2's metrics of one method on one stream."""
+    """Table 2's metrics of one method on one stream, with the traces that explain them."""
     run = stream.run
-    truth = acquired_truth(run, run.scenario.detector.min_visible_pixels)
+    truth = acquired_truth(run)
     predictions = list(result.predictions)[: len(truth)]
     identity = identity_metrics(truth, predictions)
     assignment = global_assignment(truth, predictions)
     presence = presence_f1(truth, predictions, assignment)
     fixtures = fixture_scores(run.fixtures, result.final_nodes)
-    recall = event_recall(run.events, result.events, assignment, fixtures.fixture_map, len(truth))
-    absence = false_absence(truth, predictions, assignment)
+    recall = event_recall(
+        run.events,
+        result.events,
+        assignment,
+        fixtures.fixture_map,
+        len(truth),
+        observable_frames=run.observable_frames or None,
+        frames_per_batch=FRAMES_PER_BATCH,
+        latency_bound_batches=run.scenario.event_latency_batches,
+    )
+    absence = class_false_absence(truth, predictions)
+    identity_absence = false_absence(truth, predictions, assignment)
     return {
         "idf1": identity.idf1,
         "id_switches": identity.id_switches,
         "id_presence_f1": presence.f1,
         "events_recalled": recall.recalled,
+        "events_recalled_any_latency": recall.recalled_any,
         "events_total": recall.total,
+        "events_unobservable": recall.unobservable,
+        "event_latency_bound_batches": recall.latency_bound_batches,
         "event_trace": [
             {
-                "frame": e.frame,
-                "type": e.type,
-                "object": e.object_id,
-                "recalled": ok,
-                "track": assignment.get(e.object_id),
+                "frame": outcome.event.frame,
+                "type": outcome.event.type,
+                "object": outcome.event.object_id,
+                "observable_frame": outcome.observable_frame,
+                "recalled_frame": outcome.recalled_frame,
+                "latency_batches": outcome.latency_batches,
+                "recalled": outcome.within_bound,
+                "track": assignment.get(outcome.event.object_id),
+                "track_story": _track_story(
+                    result, assignment.get(outcome.event.object_id), outcome.event.frame
+                ),
             }
-            for e, ok in recall.per_event
+            for outcome in recall.per_event
         ],
         "false_absence": absence.rate,
         "false_absent_checkpoints": absence.absent,
         "eligible_checkpoints": absence.eligible,
+        "false_absence_by_object": absence.by_object,
+        "false_absence_identity": identity_absence.rate,
+        "false_absent_checkpoints_identity": identity_absence.absent,
+        "eligible_checkpoints_identity": identity_absence.eligible,
+        "false_absence_identity_by_object": identity_absence.by_object,
         "seconds": result.seconds,
     }
+
+
+def _track_story(result: MethodRun, track_id: str | None, since: int, limit: int = 16) -> list[str]:
+    """The track's lifecycle from a frame on, as "frame:type" (visible misses as "miss").
+
+    What a reader needs to see why a change was missed or late: was the track seen again,
+    did it take misses, when was it removed or re-parented.
+    """
+    if track_id is None:
+        return []
+    story = []
+    for event in result.events:
+        if event.track_id != track_id or event.frame < since:
+            continue
+        if event.type == "update":
+            if event.details.get("evidence") != "visible_miss":
+                continue
+            story.append(f"{event.frame}:miss")
+        else:
+            story.append(f"{event.frame}:{event.type}")
+    return story[:limit]
 
 
 def fixture_table_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
@@ -127,13 +167,14 @@ def run_protocol(
     methods: Sequence[Method],
     via_service: httpx.Client | None = None,
     progress: bool = True,
+    frames: int | None = None,
 ) -> list[dict[str, Any]]:
     """Every method on every (scenario, seed) stream; one row of metrics per run."""
     score = dynamic_scores if protocol == "dynamic" else fixture_table_scores
     rows: list[dict[str, Any]] = []
     for path in scenario_paths:
         for seed in seeds:
-            stream = make_stream(path, seed)
+            stream = make_stream(path, seed, frames)
             label = f"{stream.run.scenario.name} seed {seed}"
             with tqdm(
                 total=len(methods) * len(stream.batches),
@@ -144,15 +185,18 @@ def run_protocol(
             ) as bar:
                 for method in methods:
                     bar.set_postfix(method=method.name, refresh=False)
+                    head = {
+                        "scenario": stream.run.scenario.name,
+                        "scenario_file": str(path),
+                        "scenario_sha256": stream.run.scenario_sha256,
+                        "seed": seed,
+                        "method": method.name,
+                    }
+                    reason = method.unavailable_reason()
+                    if reason is not None:  # reported as not run, never replaced by another rule
+                        bar.update(len(stream.batches))
+                        rows.append({**head, "unavailable": reason})
+                        continue
                     result = run_method(stream, method, via_service, bar)
-                    rows.append(
-                        {
-                            "scenario": stream.run.scenario.name,
-                            "scenario_file": str(path),
-                            "scenario_sha256": stream.run.scenario_sha256,
-                            "seed": seed,
-                            "method": method.name,
-                            **score(stream, result),
-                        }
-                    )
+                    rows.append({**head, **score(stream, result)})
     return rows

@@ -1,4 +1,8 @@
-"""An oracle 2D detector: ground-truth masks degraded by recall, leakage and score noise."""
+"""The oracle 2D detector: ground-truth masks degraded only by flat recall, leakage and noise.
+
+The streams of the evaluation use the realistic detector (`sim.detector_model`); this one stays
+for hand-built test worlds and benchmarks that need exact, predictable detections.
+"""
 
 from __future__ import annotations
 
@@ -8,13 +12,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
+from sim.masks import leak
 from sim.render import Render
 from sim.world import Box, World
-
-# 8-connected growth, so a leak of k pixels reaches k pixels out diagonally too.
-LEAK_STRUCTURE = np.ones((3, 3), dtype=bool)
 
 # The labels the simulated open-vocabulary segmenter is prompted with for fixtures.
 FIXTURE_VOCABULARY = ("table", "desk", "counter", "bed", "shelf", "cabinet", "sofa")
@@ -52,27 +53,6 @@ def object_embedding(object_id: str, dim: int = 64) -> np.ndarray:
     return _unit_embedding(object_id, dim).copy()
 
 
-def _bounding_slices(mask: np.ndarray, margin: int) -> tuple[slice, slice]:
-    """Row and column slices around the mask's true pixels, grown by `margin` and clipped."""
-    rows = np.flatnonzero(mask.any(axis=1))
-    cols = np.flatnonzero(mask.any(axis=0))
-    height, width = mask.shape
-    return (
-        slice(max(rows[0] - margin, 0), min(rows[-1] + margin + 1, height)),
-        slice(max(cols[0] - margin, 0), min(cols[-1] + margin + 1, width)),
-    )
-
-
-def _leak(mask: np.ndarray, leak_px: int) -> np.ndarray:
-    """The mask dilated by `leak_px` pixels, working only on its bounding box for speed."""
-    rows, cols = _bounding_slices(mask, leak_px)
-    grown = mask.copy()
-    grown[rows, cols] = ndimage.binary_dilation(
-        mask[rows, cols], structure=LEAK_STRUCTURE, iterations=leak_px
-    )
-    return grown
-
-
 def detect(
     render: Render,
     world: World,
@@ -96,7 +76,7 @@ def detect(
             continue
         mask = render.instance == index
         if boundary_leak_px > 0:
-            mask = _leak(mask, boundary_leak_px)
+            mask = leak(mask, boundary_leak_px)
         embedding = None
         if embedding_dim is not None:
             embedding = object_embedding(box.id, embedding_dim)

@@ -130,4 +130,12 @@ def composite(virtual: Render, real_depth: np.ndarray) -> tuple[Render, np.ndarr
     depth = np.where(wins, virtual.depth, real_depth).astype(np.float32)
     instance = np.where(wins, virtual.instance, -1).astype(np.int32)
     fixture_instance = np.where(wins, virtual.fixture_instance, -1).astype(np.int32)
-    return Render(depth, instance, fixture_instance, virtual.camera, virtual.pose), wins
+    occluder_instance = (
+        None
+        if virtual.occluder_instance is None
+        else np.where(wins, virtual.occluder_instance, -1).astype(np.int32)
+    )
+    composited = Render(
+        depth, instance, fixture_instance, virtual.camera, virtual.pose, occluder_instance
+    )
+    return composited, wins

@@ -22,6 +22,9 @@ class Render:
     fixture_instance: np.ndarray  # int32 (H, W) index into world.fixtures, -1 otherwise
     camera: CameraModel
     pose: np.ndarray  # (4, 4) camera-to-world
+    # int32 (H, W) index into world.occluders (walls, chairs, people), -1 otherwise; None when
+    # the render was painted by hand or composited without it.
+    occluder_instance: np.ndarray | None = None
 
 
 def _pinhole_rays(camera: CameraModel, pose: np.ndarray) -> o3d.core.Tensor:
@@ -61,9 +64,11 @@ def render(world: World, camera: CameraModel, pose: np.ndarray, *, nthreads: int
     safe_ids = np.where(missed, 0, geometry_ids).astype(np.intp)
     instance = geometry.object_lookup[safe_ids]
     fixture_instance = geometry.fixture_lookup[safe_ids]
+    occluder_instance = geometry.occluder_lookup[safe_ids]
     instance[missed] = -1
     fixture_instance[missed] = -1
-    return Render(depth, instance, fixture_instance, camera, pose)
+    occluder_instance[missed] = -1
+    return Render(depth, instance, fixture_instance, camera, pose, occluder_instance)
 
 
 def add_kinect_noise(

@@ -10,6 +10,8 @@ from typing import Any
 
 import yaml
 
+from sim.detector_settings import DetectorSpec, PhantomSpec, parse_detector
+from sim.people import PersonSpec, check_people, parse_person
 from sim.scenario_checks import check_events, check_layout, check_trajectory
 from sim.scenario_fields import ScenarioError, Section, positive, sequence, vector
 from sim.scenario_parts import (
@@ -28,10 +30,8 @@ from sim.scenario_parts import (
 )
 from sim.scenario_settings import (
     BackgroundSpec,
-    DetectorSpec,
     TrajectorySpec,
     parse_background,
-    parse_detector,
     parse_trajectory,
 )
 from sim.scenario_spec import Scenario
@@ -45,6 +45,8 @@ __all__ = [
     "FixtureSpec",
     "ObjectSpec",
     "OccluderSpec",
+    "PersonSpec",
+    "PhantomSpec",
     "Scenario",
     "ScenarioError",
     "TrajectorySpec",
@@ -53,6 +55,10 @@ __all__ = [
     "scenario_from_dict",
 ]
 
+Vec3 = tuple[float, float, float]
+# Event recall counts a change recalled when the memory reflects it within this many batches of
+# its first observable batch: 10 batches of two frames at 10 Hz is two seconds.
+DEFAULT_EVENT_LATENCY_BATCHES = 10
 # Recorded backgrounds name their data folder relative to the repository root (the folder
 # holding `sim/`), so one spelling works whichever folder the scenario file sits in.
 REPO_ROOT = Path(__file__).resolve().parent.parent
@@ -152,9 +158,13 @@ def _shortened(raw: dict[str, Any], frames: int) -> dict[str, Any]:
         if not isinstance(original, int) or isinstance(original, bool) or original < 1:
             raise ScenarioError("frames: shortening needs the file's own positive integer frames")
         shortened["frames"] = frames
-    for event in shortened.get("events") or []:
-        if isinstance(event, dict) and isinstance(event.get("frame"), int):
-            event["frame"] = event["frame"] * frames // original
+    timed = list(shortened.get("events") or [])
+    for person in shortened.get("people") or []:
+        if isinstance(person, dict):
+            timed += person.get("keyframes") or []
+    for entry in timed:
+        if isinstance(entry, dict) and isinstance(entry.get("frame"), int):
+            entry["frame"] = entry["frame"] * frames // original
     return shortened
 
 
@@ -185,6 +195,8 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
     trajectory = top.get("trajectory", parse_trajectory, None)
     events_and_new = top.get("events", lambda value, where: sequence(value, where, parse_event), [])
     detector = top.get("detector", parse_detector, None) or parse_detector({}, "detector")
+    people = tuple(top.get("people", lambda value, where: sequence(value, where, parse_person), []))
+    latency_bound = top.get("evaluation", _evaluation, DEFAULT_EVENT_LATENCY_BATCHES)
     frames = top.get("frames", lambda value, where: int(positive(value, where, integer=True)), None)
     frame_period = top.get("frame_period", positive, 0.1)
     top.finish()
@@ -213,6 +225,9 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
     objects = listed + event_only
     check_layout(room_size, walls, fixtures, occluders, objects, len(listed))
     check_events(file_order, objects, fixtures, frames)
+    taken = {spec.id for spec in (*fixtures, *occluders, *objects)}
+    check_people(people, room_size, frames, taken)
+    check_phantoms(detector.phantoms, room_size)
     fixture_ids = {spec.id for spec in fixtures}
     for fixture_id in (detector.fixtures.ambiguity or {}) if detector.fixtures else {}:
         if fixture_id not in fixture_ids:
@@ -234,6 +249,8 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
         detector=detector,
         background=background,
         frame_period=frame_period,
+        people=people,
+        event_latency_batches=latency_bound,
         source=source,
         raw=copy.deepcopy(dict(raw)),
     )
@@ -249,6 +266,29 @@ def _name(value: Any, where: str) -> str:
             f"{where}: must be a non-empty string of letters, digits, '.', '_', '-'"
         )
     return value
+
+
+def _evaluation(value: Any, where: str) -> int:
+    """The `evaluation` section: how the evaluation judges this world."""
+    section = Section(value, where)
+    bound = section.get(
+        "event_latency_batches",
+        lambda item, at: int(positive(item, at, integer=True)),
+        DEFAULT_EVENT_LATENCY_BATCHES,
+    )
+    section.finish()
+    return bound
+
+
+def check_phantoms(phantoms: tuple[PhantomSpec, ...], room_size: Vec3 | None) -> None:
+    """Phantom pictures hang inside the room (a recorded background has no room to check)."""
+    if room_size is None:
+        return
+    for index, phantom in enumerate(phantoms):
+        if not all(0.0 <= phantom.at[axis] <= room_size[axis] for axis in range(3)):
+            raise ScenarioError(
+                f"detector.phantoms[{index}].at: {list(phantom.at)} is outside the room"
+            )
 
 
 def _room(value: Any, where: str) -> tuple[float, float, float]:

@@ -1,8 +1,7 @@
-"""Run settings of a scenario file: camera trajectory, detector model and recorded background."""
+"""Run settings of a scenario file: camera trajectory and recorded background (the detector: `sim.detector_settings`)."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -10,8 +9,6 @@ from typing import Any
 from sim.scenario_fields import (
     ScenarioError,
     Section,
-    count,
-    fraction,
     number,
     positive,
     sequence,
@@ -21,7 +18,6 @@ from sim.scenario_fields import (
 
 Vec2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
-DEPTH_NOISE_MODELS = ("kinect", "none")
 
 
 @dataclass(frozen=True)
@@ -30,6 +26,7 @@ class Waypoint:
 
     at: tuple[float, float, float | None]
     look_at: Vec3
+    pause: float = 0.0  # share of each lap the camera stands here, looking at look_at
 
 
 @dataclass(frozen=True)
@@ -60,8 +57,9 @@ def _waypoint(value: Any, where: str) -> Waypoint:
     if len(at) not in (2, 3):
         raise ScenarioError(f"{where}.at: expected [x, y] or [x, y, z]")
     look = section.get("look_at", lambda item, path: vector(item, path, 3))
+    pause = section.get("pause", lambda item, path: number(item, path, 0.0, 0.9), 0.0)
     section.finish()
-    return Waypoint((at[0], at[1], at[2] if len(at) == 3 else None), look)
+    return Waypoint((at[0], at[1], at[2] if len(at) == 3 else None), look, pause)
 
 
 def _radii(value: Any, where: str) -> Vec2:
@@ -97,6 +95,8 @@ def parse_trajectory(value: Any, where: str) -> TrajectorySpec:
         points = tuple(section.get("points", lambda item, at: sequence(item, at, _waypoint)))
         if len(points) < 2:
             raise ScenarioError(f"{where}.points: needs at least two waypoints")
+        if sum(point.pause for point in points) > 0.9:
+            raise ScenarioError(f"{where}.points: the pauses take more than 0.9 of a lap")
         spec = TrajectorySpec(kind, loops, points=points)
     elif kind == "orbit":
         targets = section.get("look_at", _look_targets)
@@ -117,96 +117,6 @@ def parse_trajectory(value: Any, where: str) -> TrajectorySpec:
         )
     else:
         raise ScenarioError(f"{where}.type: {kind!r} is not one of waypoints, orbit")
-    section.finish()
-    return spec
-
-
-@dataclass(frozen=True)
-class FixtureDetectorSpec:
-    """Settings of the fixture segmenter (see `sim.detector.detect_fixtures`)."""
-
-    recall: float = 1.0
-    score_noise: float = 0.02
-    min_visible_pixels: int = 400
-    ambiguity: Mapping[str, Mapping[str, float]] | None = None
-
-
-@dataclass(frozen=True)
-class DetectorSpec:
-    """The simulated object detector's degradations and the depth noise model."""
-
-    recall: float = 1.0
-    min_visible_pixels: int = 150
-    false_positives_per_frame: float = 0.0
-    label_confusion: float = 0.0
-    mask_boundary_leak_px: int = 0
-    depth_noise: str = "kinect"
-    embedding_dim: int | None = 64
-    embedding_noise: float = 0.0
-    score: float = 0.9
-    fixtures: FixtureDetectorSpec | None = FixtureDetectorSpec()
-
-
-def _ambiguity(value: Any, where: str) -> dict[str, dict[str, float]]:
-    """Fixture id -> {label: score} overrides."""
-    section = Section(value, where)
-    parsed = {}
-    for fixture_id in map(str, value):
-        scores = section.get(fixture_id, lambda item, at: Section(item, at).data)
-        parsed[fixture_id] = {
-            str(label): fraction(score, f"{where}.{fixture_id}.{label}")
-            for label, score in scores.items()
-        }
-    return parsed
-
-
-def _fixture_detector(value: Any, where: str) -> FixtureDetectorSpec:
-    """The `detector.fixtures` section."""
-    section, default = Section(value, where), FixtureDetectorSpec()
-    spec = FixtureDetectorSpec(
-        recall=section.get("recall", fraction, default.recall),
-        score_noise=section.get(
-            "score_noise", lambda item, at: positive(item, at, zero=True), 0.02
-        ),
-        min_visible_pixels=section.get("min_visible_pixels", count, default.min_visible_pixels),
-        ambiguity=section.get("ambiguity", _ambiguity, None),
-    )
-    section.finish()
-    return spec
-
-
-def _embedding(value: Any, where: str) -> tuple[int | None, float]:
-    """The `detector.embedding` section: dim (null = no embeddings) and noise sigma."""
-    section = Section(value, where)
-    dim = section.get("dim", lambda item, at: int(positive(item, at, integer=True)), None)
-    noise = section.get("noise", lambda item, at: positive(item, at, zero=True), 0.0)
-    section.finish()
-    return dim, noise
-
-
-def parse_detector(value: Any, where: str) -> DetectorSpec:
-    """The `detector` section (every field optional)."""
-    section, default = Section(value, where), DetectorSpec()
-    noise_model = section.get("depth_noise", text, default.depth_noise)
-    if noise_model not in DEPTH_NOISE_MODELS:
-        raise ScenarioError(f"{where}.depth_noise: {noise_model!r} is not one of kinect, none")
-    dim, embedding_noise = section.get("embedding", _embedding, (64, 0.0))
-    fixtures_given = section.data.get("fixtures", {}) is not None  # explicit null turns them off
-    fixtures = section.get("fixtures", _fixture_detector, FixtureDetectorSpec())
-    spec = DetectorSpec(
-        recall=section.get("recall", fraction, default.recall),
-        min_visible_pixels=section.get("min_visible_pixels", count, default.min_visible_pixels),
-        false_positives_per_frame=section.get(
-            "false_positives_per_frame", lambda item, at: positive(item, at, zero=True), 0.0
-        ),
-        label_confusion=section.get("label_confusion", fraction, 0.0),
-        mask_boundary_leak_px=section.get("mask_boundary_leak_px", count, 0),
-        depth_noise=noise_model,
-        embedding_dim=dim,
-        embedding_noise=embedding_noise,
-        score=section.get("score", fraction, default.score),
-        fixtures=fixtures if fixtures_given else None,
-    )
     section.finish()
     return spec
 

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from sim.detector_settings import DetectorSpec
+from sim.people import PersonSpec
 from sim.scenario_parts import (
     CameraSpec,
     EventSpec,
@@ -21,7 +23,7 @@ from sim.scenario_parts import (
     OccluderSpec,
     WallSpec,
 )
-from sim.scenario_settings import BackgroundSpec, DetectorSpec, TrajectorySpec
+from sim.scenario_settings import BackgroundSpec, TrajectorySpec
 
 
 @dataclass(frozen=True)
@@ -42,6 +44,8 @@ class Scenario:
     detector: DetectorSpec
     background: BackgroundSpec | None
     frame_period: float
+    people: tuple[PersonSpec, ...] = ()
+    event_latency_batches: int = 10  # the evaluation's bound on event latency
     source: Path | None = field(default=None, compare=False)
     raw: Mapping[str, Any] = field(default_factory=dict, compare=False, repr=False)
 

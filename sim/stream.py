@@ -11,7 +11,6 @@ import argparse
 import dataclasses
 import itertools
 import json
-import math
 import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -22,11 +21,12 @@ import numpy as np
 from tqdm import tqdm
 
 from sim.camera import CameraModel
-from sim.detector import SimDetection, detect, detect_fixtures
+from sim.detector import SimDetection
+from sim.detector_model import RealisticDetector
+from sim.observability import observable_frames
 from sim.recorded import RecordedSequence, composite, load_recorded
 from sim.render import add_kinect_noise, render
 from sim.scenario import Scenario, load_scenario, scenario_from_dict
-from sim.spurious import confuse_labels, false_positives
 from sim.timeline import Timeline
 from sim.trajectory import trajectory_poses
 from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject
@@ -56,6 +56,8 @@ class SimRun:
     fixtures: tuple[TruthFixture, ...]
     events: tuple[ScheduledEvent, ...]
     scenario_sha256: str
+    # Per event: the first frame the change could be seen (sim.observability), None if never.
+    observable_frames: tuple[int | None, ...] = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,7 +91,7 @@ def iter_frames(scenario: Scenario, seed: int, *, progress: bool = False) -> Ite
     """Simulate frame after frame; memory stays flat, unlike holding a whole `SimRun`."""
     timeline, source, rng = Timeline(scenario), frame_source(scenario), run_rng(scenario, seed)
     settings = scenario.detector
-    labels = scenario.object_labels
+    detector = RealisticDetector(scenario, rng)
     indices = range(scenario.frames)
     for frame_index in tqdm(indices, desc=scenario.name, disable=not progress):
         world, pose = timeline.world(frame_index), source.poses[frame_index]
@@ -98,40 +100,7 @@ def iter_frames(scenario: Scenario, seed: int, *, progress: bool = False) -> Ite
         if source.recording is not None:
             view, virtual_pixels = composite(view, source.recording.depth(frame_index))
         truth = timeline.truth(frame_index, view.instance)
-        detections = detect(
-            view,
-            world,
-            rng,
-            recall=settings.recall,
-            min_visible_pixels=settings.min_visible_pixels,
-            boundary_leak_px=settings.mask_boundary_leak_px,
-            # `noise` is the size of the whole noise vector relative to the unit appearance, so
-            # the same object looks alike (cosine ~ 1 / sqrt(1 + noise^2)) at any dimension.
-            embedding_noise=settings.embedding_noise / math.sqrt(settings.embedding_dim or 1),
-            score=settings.score,
-            embedding_dim=settings.embedding_dim,
-        )
-        detections = confuse_labels(detections, labels, settings.label_confusion, rng)
-        if settings.fixtures is not None:
-            detections += detect_fixtures(
-                view,
-                world,
-                rng,
-                recall=settings.fixtures.recall,
-                min_visible_pixels=settings.fixtures.min_visible_pixels,
-                score_noise=settings.fixtures.score_noise,
-                ambiguity=settings.fixtures.ambiguity,
-            )
-        detections += false_positives(
-            view,
-            world,
-            rng,
-            rate=settings.false_positives_per_frame,
-            labels=labels,
-            frame_index=frame_index,
-            score=settings.score,
-            embedding_dim=settings.embedding_dim,
-        )
+        detections = detector.detect(view, world, frame_index, rng)
         depth = view.depth
         if settings.depth_noise == "kinect":
             noisy = add_kinect_noise(depth, rng)
@@ -150,10 +119,24 @@ def iter_frames(scenario: Scenario, seed: int, *, progress: bool = False) -> Ite
 
 def simulate(scenario: Scenario, seed: int, *, progress: bool = False) -> SimRun:
     """The whole run in memory (about 1 MB of depth and masks per 640 x 480 frame)."""
-    timeline = Timeline(scenario)
+    timeline, source = Timeline(scenario), frame_source(scenario)
     frames = tuple(iter_frames(scenario, seed, progress=progress))
+    observable = observable_frames(
+        scenario,
+        frames,
+        timeline.events,
+        source.camera,
+        source.poses,
+        None if source.recording is None else source.recording.depth,
+    )
     return SimRun(
-        scenario, seed, frames, timeline.fixture_truths(), timeline.events, scenario.sha256
+        scenario,
+        seed,
+        frames,
+        timeline.fixture_truths(),
+        timeline.events,
+        scenario.sha256,
+        observable,
     )
 
 
@@ -205,7 +188,7 @@ def wire_batches(
     )
 
 
-RUN_FORMAT = 1
+RUN_FORMAT = 2  # 2: observable frames of the events
 
 
 def _detection_record(detection: SimDetection, mask_index: int) -> dict[str, Any]:
@@ -262,6 +245,7 @@ def save_run(run: SimRun, folder: str | Path) -> None:
         "seed": run.seed,
         "fixtures": [dataclasses.asdict(fixture) for fixture in run.fixtures],
         "events": [dataclasses.asdict(event) for event in run.events],
+        "observable_frames": list(run.observable_frames),
         "frames": [
             {
                 "frame_index": frame.frame_index,
@@ -327,7 +311,15 @@ def load_run(folder: str | Path) -> SimRun:
         for entry in record["fixtures"]
     )
     events = tuple(ScheduledEvent(**entry) for entry in record["events"])
-    return SimRun(scenario, record["seed"], frames, fixtures, events, record["scenario_sha256"])
+    return SimRun(
+        scenario,
+        record["seed"],
+        frames,
+        fixtures,
+        events,
+        record["scenario_sha256"],
+        tuple(record["observable_frames"]),
+    )
 
 
 def main(argv: list[str] | None = None) -> None:

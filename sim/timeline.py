@@ -66,8 +66,11 @@ class Timeline:
         return self.epoch_placements[self._epoch(frame_index)]
 
     def world(self, frame_index: int) -> World:
-        """The world as it is at this frame (present objects only, in scenario order)."""
-        return self.epoch_worlds[self._epoch(frame_index)]
+        """The world as it is at this frame (present objects only, in scenario order, and the
+        people walking through it at this frame)."""
+        walkers = (person.box_at(frame_index) for person in self.scenario.people)
+        people = tuple(box for box in walkers if box is not None)
+        return self.epoch_worlds[self._epoch(frame_index)].with_people(people)
 
     def object_box(self, object_id: str, placement: Placement) -> Box:
         """The object's box for a placement."""

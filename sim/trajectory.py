@@ -22,14 +22,18 @@ def _waypoint_nodes(spec: TrajectorySpec, eye_height: float) -> tuple[np.ndarray
 
 
 def _along_polyline(
-    eyes: np.ndarray, targets: np.ndarray, fraction: float
+    eyes: np.ndarray, targets: np.ndarray, fraction: float, pauses: tuple[float, ...] = ()
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Eye and gaze target at `fraction` of the polyline's length (constant walking speed)."""
+    """Eye and gaze target at `fraction` of a lap: pauses at the waypoints, constant speed between."""
     lengths = np.linalg.norm(np.diff(eyes, axis=0), axis=1)
-    cumulative = np.concatenate([[0.0], np.cumsum(lengths)])
-    distance = fraction * cumulative[-1]
-    segment = min(int(np.searchsorted(cumulative, distance, side="right")) - 1, len(lengths) - 1)
-    local = 0.0 if lengths[segment] == 0 else (distance - cumulative[segment]) / lengths[segment]
+    stops = np.zeros(len(lengths)) if not pauses else np.asarray(pauses, dtype=np.float64)
+    # Each waypoint takes its pause share of the lap, then its segment a share of the rest
+    # proportional to the segment's length.
+    moving = (1.0 - stops.sum()) * lengths / max(float(lengths.sum()), 1e-12)
+    starts = np.concatenate([[0.0], np.cumsum(stops + moving)])
+    segment = min(int(np.searchsorted(starts, fraction, side="right")) - 1, len(lengths) - 1)
+    into = fraction - starts[segment] - stops[segment]
+    local = 0.0 if into <= 0 or moving[segment] == 0 else min(into / moving[segment], 1.0)
     # The gaze target slides between the two waypoints' targets, so views turn smoothly.
     eye = eyes[segment] + local * (eyes[segment + 1] - eyes[segment])
     target = targets[segment] + local * (targets[segment + 1] - targets[segment])
@@ -62,10 +66,11 @@ def trajectory_poses(spec: TrajectorySpec, frames: int, eye_height: float) -> li
     poses = []
     if spec.type == "waypoints":
         eyes, targets = _waypoint_nodes(spec, eye_height)
+        pauses = tuple(point.pause for point in spec.points)
     for frame_index in range(frames):
         lap_fraction = (frame_index * spec.loops / frames) % 1.0
         if spec.type == "waypoints":
-            eye, target = _along_polyline(eyes, targets, lap_fraction)
+            eye, target = _along_polyline(eyes, targets, lap_fraction, pauses)
         else:
             angle = spec.start_angle + 2.0 * math.pi * lap_fraction
             eye = _orbit_eye(spec, eye_height, angle)

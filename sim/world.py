@@ -87,6 +87,13 @@ class World:
         occluder = dataclasses.replace(box, kind="occluder")
         return dataclasses.replace(self, occluders=(*self.occluders, occluder))
 
+    def with_people(self, people: tuple[Box, ...]) -> World:
+        """The world with people walking in it: occluders of kind "person" (appended)."""
+        if not people:
+            return self
+        walkers = tuple(dataclasses.replace(box, kind="person") for box in people)
+        return dataclasses.replace(self, occluders=(*self.occluders, *walkers))
+
 
 def _as_vec3(values: tuple[float, ...] | list[float] | np.ndarray) -> Vec3:
     """Plain float triple, so boxes stay hashable whatever the caller passed."""
@@ -134,6 +141,7 @@ class SceneGeometry:
     box_by_geometry: dict[int, Box | None]  # None marks the room's own surfaces
     object_lookup: np.ndarray  # geometry id -> index into world.objects, -1 for the rest
     fixture_lookup: np.ndarray  # geometry id -> index into world.fixtures, -1 for the rest
+    occluder_lookup: np.ndarray  # geometry id -> index into world.occluders, -1 for the rest
 
 
 def _add_box(scene: o3d.t.geometry.RaycastingScene, corners: np.ndarray) -> int:
@@ -170,10 +178,10 @@ def build_scene(world: World) -> SceneGeometry:
     lookup_size = max((geometry_id for geometry_id, *_ in placed), default=0) + 1
     object_lookup = np.full(lookup_size, -1, dtype=np.int32)
     fixture_lookup = np.full(lookup_size, -1, dtype=np.int32)
+    occluder_lookup = np.full(lookup_size, -1, dtype=np.int32)
+    lookups = {"object": object_lookup, "fixture": fixture_lookup, "occluder": occluder_lookup}
     for geometry_id, _, group, index in placed:
-        if group == "object":
-            object_lookup[geometry_id] = index
-        elif group == "fixture":
-            fixture_lookup[geometry_id] = index
+        if group in lookups:
+            lookups[group][geometry_id] = index
     box_by_geometry = {geometry_id: box for geometry_id, box, *_ in placed}
-    return SceneGeometry(scene, box_by_geometry, object_lookup, fixture_lookup)
+    return SceneGeometry(scene, box_by_geometry, object_lookup, fixture_lookup, occluder_lookup)

@@ -6,9 +6,13 @@ import math
 
 import pytest
 
-from evaluation.metrics import (
+from evaluation.change_metrics import (
+    class_false_absence,
     event_recall,
     false_absence,
+    latency_summary,
+)
+from evaluation.metrics import (
     fixture_scores,
     global_assignment,
     identity_metrics,
@@ -131,13 +135,14 @@ def test_global_assignment_maximizes_total_co_occurrence_not_greedy() -> None:
     assert global_assignment(truth, predictions) == {"a": "t2", "b": "t1"}
 
 
-def test_presence_counts_ghosts_missing_tracks_and_unassigned_objects() -> None:
-    # frame 0: a, b present; t1 (3 m off: distance is ignored), t2 and ghost g published, plus
-    #          a fixture node that object metrics ignore      -> TP 2, FP 1
-    # frame 1: a, b present; t1, t2, g published                -> TP 2, FP 1
+def test_presence_counts_ghosts_missing_tracks_far_tracks_and_unassigned_objects() -> None:
+    # frame 0: a, b present; t1 (3 m from a: outside the 0.5 m gate), t2 on b, ghost g, and a
+    #          fixture node that object metrics ignore      -> TP 1 (b), FN 1 (a), FP 1 (g);
+    #          t1 is a's own track, published away from it: a miss, not also a ghost
+    # frame 1: a, b present; t1 on a, t2 on b, g published     -> TP 2, FP 1 (g)
     # frame 2: a, b, c present (c unassigned); only t1         -> TP 1, FN 2 (b's t2, c)
     # frame 3: a present, b listed absent; t1, t2 published     -> TP 1, FP 1 (t2)
-    # TP 6, FP 3, FN 2: precision 6/9, recall 6/8, f1 = 12 / (12 + 3 + 2) = 12/17.
+    # TP 5, FP 3, FN 3: precision 5/8, recall 5/8, f1 = 10 / (10 + 3 + 3) = 5/8.
     a, b, c = truth_object("a"), truth_object("b", FAR), truth_object("c")
     truth = truth_frames([a, b], [a, b], [a, b, c], [a, truth_object("b", FAR, present=False)])
     predictions = prediction_frames(
@@ -147,10 +152,13 @@ def test_presence_counts_ghosts_missing_tracks_and_unassigned_objects() -> None:
         [node("t1"), node("t2", FAR)],
     )
     scores = presence_f1(truth, predictions, {"a": "t1", "b": "t2"})
-    assert (scores.tp, scores.fp, scores.fn) == (6, 3, 2)
-    assert scores.precision == pytest.approx(6 / 9)
-    assert scores.recall == pytest.approx(6 / 8)
-    assert scores.f1 == pytest.approx(12 / 17)
+    assert (scores.tp, scores.fp, scores.fn) == (5, 3, 3)
+    assert scores.precision == pytest.approx(5 / 8)
+    assert scores.recall == pytest.approx(5 / 8)
+    assert scores.f1 == pytest.approx(5 / 8)
+    # Without a gate (a huge radius) t1 in frame 0 counts for a: the earlier, distance-blind figure.
+    loose = presence_f1(truth, predictions, {"a": "t1", "b": "t2"}, max_distance=100.0)
+    assert (loose.tp, loose.fp, loose.fn) == (6, 3, 2)
 
 
 def test_event_recall_per_event_type() -> None:
@@ -179,7 +187,7 @@ def test_event_recall_per_event_type() -> None:
         MethodEvent(10, "confirm", "t4", {}),
     ]
     result = event_recall(scheduled, method_events, assignment, fixture_map, n_frames=10)
-    assert [recalled for _, recalled in result.per_event] == [
+    assert [outcome.recalled for outcome in result.per_event] == [
         True,
         False,
         True,
@@ -189,8 +197,46 @@ def test_event_recall_per_event_type() -> None:
         False,
         False,
     ]
-    assert [event for event, _ in result.per_event] == scheduled
-    assert (result.recalled, result.total) == (3, 8)
+    assert [outcome.event for outcome in result.per_event] == scheduled
+    assert (result.recalled, result.total, result.recalled_any) == (3, 8, 3)
+
+
+def test_event_latency_counts_batches_from_the_first_observable_frame() -> None:
+    # Two frames per batch; bound 10 batches.
+    # mug appears at 2, first seen at 6 (batch 3), confirmed at 9 (batch 4): latency 1.
+    # bowl disappears at 4, never observable: removed at 30 (batch 15), latency counted from the
+    #   scheduled frame (batch 2): 13 > 10 -> reflected, but not recalled within the bound.
+    # book moves at 4, observable at 8 (batch 4), its move at 5 (batch 2): floored to 0.
+    # cup transfers at 6: no reparent at all -> missed.
+    assignment = {"mug": "t1", "bowl": "t2", "book": "t3", "cup": "t4"}
+    scheduled = [
+        ScheduledEvent(2, "appear", "mug", parent="table"),
+        ScheduledEvent(4, "disappear", "bowl"),
+        ScheduledEvent(4, "move", "book"),
+        ScheduledEvent(6, "transfer", "cup", parent="table"),
+    ]
+    method_events = [
+        MethodEvent(9, "confirm", "t1", {}),
+        MethodEvent(30, "remove", "t2", {}),
+        MethodEvent(5, "move", "t3", {}),
+        MethodEvent(12, "move", "t3", {}),
+    ]
+    result = event_recall(
+        scheduled,
+        method_events,
+        assignment,
+        {"table": "F1"},
+        n_frames=40,
+        observable_frames=[6, None, 8, 7],
+        frames_per_batch=2,
+        latency_bound_batches=10,
+    )
+    assert [o.latency_batches for o in result.per_event] == [1, 13, 0, None]
+    assert [o.recalled_frame for o in result.per_event] == [9, 30, 5, None]
+    assert [o.within_bound for o in result.per_event] == [True, False, True, False]
+    assert (result.recalled, result.recalled_any, result.unobservable, result.total) == (2, 3, 1, 4)
+    assert latency_summary([1, 13, 0]) == (1.0, 13)
+    assert latency_summary([1, 4]) == (2.5, 4) and latency_summary([]) is None
 
 
 def test_false_absence_counts_only_after_first_publication() -> None:
@@ -224,6 +270,36 @@ def test_false_absence_counts_only_after_first_publication() -> None:
     result = false_absence(truth, predictions, {"mug": "t1", "book": "t2", "cup": "t4"})
     assert (result.absent, result.eligible) == (3, 7)
     assert result.rate == pytest.approx(3 / 7)
+    assert result.by_object == {"mug": 1, "book": 2}
+
+
+def test_class_false_absence_asks_for_any_node_of_the_class_within_half_a_metre() -> None:
+    # mug at the origin, cup at 3 m.
+    # frame 0: a mug node 0.1 m away covers the mug (acquired from frame 1 on); no cup node.
+    # frame 1: the node near the mug is now labelled cup -> mug eligible, absent.
+    # frame 2: a mug node 0.6 m away (outside the gate) -> mug absent; a cup node 0.4 m from the
+    #          cup covers it (cup acquired from frame 3 on).
+    # frame 3: mug not present; no nodes -> cup eligible, absent.
+    # frame 4: a mug node exactly 0.5 m away (inclusive) covers the mug; cup absent.
+    # eligible: mug 1, 2, 4 and cup 3, 4 = 5; absent: mug 1, 2 and cup 3, 4 = 4 -> 4/5.
+    def objects(mug_present: bool = True) -> list[TruthObject]:
+        return [
+            TruthObject("mug", "mug", ORIGIN, mug_present, None, 500),
+            TruthObject("cup", "cup", FAR, True, None, 500),
+        ]
+
+    truth = truth_frames(objects(), objects(), objects(), objects(False), objects())
+    predictions = prediction_frames(
+        [node("n1", (0.1, 0.0, 0.0))],
+        [node("n1", ORIGIN, label="cup")],
+        [node("n2", (0.6, 0.0, 0.0)), node("n3", (3.4, 0.0, 0.0), label="cup")],
+        [],
+        [node("n4", (0.5, 0.0, 0.0))],
+    )
+    result = class_false_absence(truth, predictions)
+    assert (result.absent, result.eligible) == (4, 5)
+    assert result.rate == pytest.approx(4 / 5)
+    assert result.by_object == {"mug": 2, "cup": 2}
 
 
 def test_false_absence_with_nothing_eligible_is_zero() -> None:

@@ -5,9 +5,9 @@ from __future__ import annotations
 from evaluation.report import table, write_report
 
 
-def run(method, idf1, recalled, absent, eligible):
+def run(method, idf1, recalled, absent, eligible, scenario="s", latencies=(0, 2, None, 1)):
     return {
-        "scenario": "s",
+        "scenario": scenario,
         "scenario_file": "s.yaml",
         "scenario_sha256": "0" * 64,
         "seed": 7,
@@ -19,15 +19,34 @@ def run(method, idf1, recalled, absent, eligible):
         "events_total": 4,
         "false_absent_checkpoints": absent,
         "eligible_checkpoints": eligible,
+        "false_absence_by_object": {"mug": absent} if absent else {},
+        "false_absent_checkpoints_identity": 0,
+        "eligible_checkpoints_identity": eligible,
+        "event_latency_bound_batches": 10,
+        "event_trace": [
+            {
+                "frame": 10 * k,
+                "type": "move",
+                "object": "mug",
+                "observable_frame": 10 * k,
+                "recalled_frame": None if latency is None else 10 * k + 2 * latency,
+                "latency_batches": latency,
+                "recalled": latency is not None,
+                "track": "t1",
+                "track_story": ["12:miss"],
+            }
+            for k, latency in enumerate(latencies)
+        ],
     }
 
 
 def test_pooled_columns_and_sample_std(tmp_path):
     rows = [run("A", 0.8, 3, 1, 10), run("A", 1.0, 4, 0, 30), run("B", 0.5, 1, 5, 0)]
     text = table("dynamic", rows)
-    # A: idf1 mean .9, sample std .141; events 7/8; false absence pooled 1/40 = .025. B: nothing eligible.
-    assert "| A | .900±.141 | .900±.141 | .000±.000 | 7/8 | .025 |" in text
-    assert "| B | .500±.000 | .500±.000 | .000±.000 | 1/4 | .000 |" in text
+    # A: idf1 mean .9, sample std .141; events 7/8; false absence pooled 1/40 = .025, by
+    # identity 0/40; latencies 0, 2, 1, 0, 2, 1 -> median 1, max 2. B: nothing eligible.
+    assert "| A | .900±.141 | .900±.141 | .000±.000 | 7/8 | .025 | .000 | 1/2 |" in text
+    assert "| B | .500±.000 | .500±.000 | .000±.000 | 1/4 | .000 | .000 | 1/2 |" in text
     written = write_report("dynamic", rows, tmp_path, [7])
     assert [p.name for p in written] == [
         "results.json",
@@ -36,3 +55,26 @@ def test_pooled_columns_and_sample_std(tmp_path):
         "false_absence.png",
     ]
     assert all(p.stat().st_size > 0 for p in written)
+
+
+def test_the_headline_is_the_hotel_suite_alone_and_shortfalls_carry_their_trace(tmp_path):
+    rows = [
+        run("PBD-AG", 0.9, 3, 2, 10, scenario="hotel-suite"),
+        run("PBD-AG", 0.5, 1, 0, 10, scenario="office", latencies=(None, None, 0, 0)),
+        {"scenario": "hotel-suite", "seed": 7, "method": "X", "unavailable": "no rule yet",
+         "scenario_file": "h.yaml", "scenario_sha256": "0" * 64},
+    ]  # fmt: skip
+    write_report("dynamic", rows, tmp_path, [7])
+    text = (tmp_path / "table.md").read_text()
+    headline = text.split("## Table 2: hotel-suite alone, as the paper")[1].split("## Pooled")[0]
+    assert "| PBD-AG | .900±.000 |" in headline and "3/4" in headline
+    pooled_table = text.split("## Pooled over every scenario")[1].split("## Event latency")[0]
+    assert "| PBD-AG | .700±.283 |" in pooled_table and "4/8" in pooled_table
+    # Latencies pooled: 0, 2, 1 (hotel) and 0, 0 (office); three events never reflected.
+    assert "| PBD-AG | 0 (x3), 1, 2 | 3 |" in text
+    assert (
+        "office seed 7: move of mug at frame 0 (observable from frame 0), track t1, never" in text
+    )
+    assert "track from then on: 12:miss" in text
+    assert "hotel-suite seed 7: mug was present with no PBD-AG node" in text
+    assert "- X: not run (no rule yet)." in text

@@ -77,7 +77,8 @@ def test_run_creates_a_scene_and_posts_every_frame_in_batches() -> None:
     assert len(objects) + len(fixtures) == len(detections)
     assert {detection["label"] for detection in objects} <= {"mug", "book", "bowl", "bottle"}
     assert all(len(detection["embedding"]) == 64 for detection in objects)
-    assert {"table", "counter"} <= {detection["label"] for detection in fixtures}
+    # A view may put a confusable class on top (the desk-table pair), never drop the true one.
+    assert {"table", "counter"} <= {label for d in fixtures for label in d["class_scores"]}
     for fixture in fixtures:
         assert "embedding" not in fixture and set(fixture["class_scores"]) <= set(
             FIXTURE_VOCABULARY

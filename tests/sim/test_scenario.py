@@ -31,7 +31,9 @@ def short_hotel_run() -> SimRun:
     return simulate(load_scenario(HOTEL, frames=SHORT_FRAMES), seed=0)
 
 
-@pytest.mark.parametrize("name", ["hotel-suite", "bedroom", "office", "kitchen-real"])
+@pytest.mark.parametrize(
+    "name", ["hotel-suite", "bedroom", "office", "kitchen-real", "busy-living-room"]
+)
 def test_every_shipped_scenario_loads_with_the_four_event_types(name: str) -> None:
     scenario = load_scenario(SCENARIOS / f"{name}.yaml")
     assert scenario.name == name
@@ -72,6 +74,44 @@ def _load_with(tmp_path: Path, text: str) -> Any:
             {"detector": {"fixtures": {"ambiguity": {"desk_9": {"desk": 0.5}}}}},
             r"ambiguity\.desk_9",
         ),
+        ({"evaluation": {"event_latency_batches": 0}}, r"evaluation\.event_latency_batches"),
+        (
+            {"people": [{"id": "p", "keyframes": [{"frame": 5, "at": [1, 1]}]}]},
+            r"people\[0\]\.keyframes",
+        ),
+        (
+            {
+                "people": [
+                    {
+                        "id": "p",
+                        "keyframes": [{"frame": 5, "at": [1, 1]}, {"frame": 2, "at": [1, 2]}],
+                    }
+                ]
+            },
+            r"people\[0\]\.keyframes\[1\]\.frame",
+        ),
+        (
+            {
+                "people": [
+                    {
+                        "id": "mug_1",
+                        "keyframes": [{"frame": 1, "at": [1, 1]}, {"frame": 2, "at": [1, 2]}],
+                    }
+                ]
+            },
+            r"people\[0\]\.id",
+        ),
+        (
+            {
+                "people": [
+                    {
+                        "id": "p",
+                        "keyframes": [{"frame": 1, "at": [9, 1]}, {"frame": 2, "at": [1, 2]}],
+                    }
+                ]
+            },
+            r"people\[0\]\.keyframes\[0\]\.at",
+        ),
     ],
 )
 def test_a_bad_field_gives_an_error_naming_it(overrides: dict[str, Any], field: str) -> None:
@@ -111,6 +151,28 @@ def test_a_path_through_a_wall_is_rejected() -> None:
     ]
     with pytest.raises(ScenarioError, match=r"segment from points\[0\] to points\[1\].*walls\[0\]"):
         load_scenario(HOTEL, {"trajectory": {"points": points}})
+
+
+def test_a_waypoint_pause_holds_the_camera_for_its_share_of_each_lap() -> None:
+    from sim.scenario_settings import TrajectorySpec, Waypoint
+
+    target = (2.0, 3.0, 0.7)
+    spec = TrajectorySpec(
+        "waypoints",
+        loops=2,
+        points=(
+            Waypoint((1.0, 1.0, None), target, pause=0.25),
+            Waypoint((3.0, 1.0, None), target),
+        ),
+    )
+    poses = trajectory_poses(spec, 80, 1.2)  # 40 frames per lap
+    eyes = np.array([pose[:3, 3] for pose in poses])
+    parked = np.all(np.isclose(eyes[:, :2], (1.0, 1.0)), axis=1)
+    # A quarter of each 40-frame lap (frames 0-9, and frame 10 where walking starts) at the first
+    # waypoint, then walking there and back.
+    assert parked[:11].all() and parked[40:51].all() and parked.sum() == 22
+    steps = np.linalg.norm(np.diff(eyes[10:41], axis=0), axis=1)
+    assert steps.max() < 1.5 * steps.mean()  # constant speed while walking
 
 
 def test_orbit_poses_circle_the_center_and_look_at_the_target() -> None:

@@ -19,17 +19,19 @@ from sim.timeline import Timeline
 
 HOTEL = REPO_ROOT / "sim" / "scenarios" / "hotel-suite.yaml"
 OFFICE = REPO_ROOT / "sim" / "scenarios" / "office.yaml"
+# Every error mode of the detector at its kind value: the oracle detector of old.
+ORACLE = {
+    "recall": 1.0,
+    "masks": {"boundary_leak_px": 0, "partial_rate": 0, "split_rate": 0, "support_bleed_rate": 0},
+    "labels": {"flicker": 0, "confusion": 0},
+    "false_positives_per_frame": 0.0,
+    "phantoms": [],
+}
 
 
 def test_truth_visible_pixels_match_the_instance_map_and_exact_masks() -> None:
     # Perfect detector: every visible object is detected with its exact instance mask.
-    perfect = {
-        "recall": 1.0,
-        "mask_boundary_leak_px": 0,
-        "label_confusion": 0.0,
-        "false_positives_per_frame": 0.0,
-    }
-    scenario = load_scenario(OFFICE, {"detector": perfect}, frames=10)
+    scenario = load_scenario(OFFICE, {"detector": ORACLE}, frames=10)
     run = simulate(scenario, seed=3)
     timeline, source = Timeline(scenario), frame_source(scenario)
     checked = 0
@@ -73,7 +75,7 @@ def test_wire_batches_validate_and_group_consecutive_frames() -> None:
 
 
 def test_false_positives_and_label_confusion_appear_at_their_rates() -> None:
-    noisy = {"false_positives_per_frame": 3.0, "label_confusion": 0.3, "recall": 1.0}
+    noisy = {**ORACLE, "false_positives_per_frame": 3.0, "labels": {"flicker": 0, "confusion": 0.3}}
     scenario = load_scenario(OFFICE, {"detector": noisy}, frames=30)
     run = simulate(scenario, seed=5)
     false_positives, true_objects, confused = [], 0, 0
@@ -101,6 +103,7 @@ def test_a_saved_run_loads_back_equal(tmp_path: Path) -> None:
     loaded = load_run(tmp_path / "cache")
     assert loaded.scenario == run.scenario and loaded.scenario_sha256 == run.scenario_sha256
     assert loaded.fixtures == run.fixtures and loaded.events == run.events
+    assert loaded.observable_frames == run.observable_frames
     for first, second in zip(run.frames, loaded.frames, strict=True):
         assert np.array_equal(first.depth, second.depth) and np.array_equal(first.pose, second.pose)
         assert first.truth == second.truth and first.camera == second.camera

@@ -1,0 +1,220 @@
+"""Metrics of a memory over time: event recall within a latency bound, and false absence.
+
+Event latency starts at the first frame a change could be seen (`sim.observability`), so it
+measures the memory, not the camera's route; it is counted in batches (the update step).
+False absence comes in two readings: identity-agnostic (a present object counts as absent when
+no published node of its class is within 0.5 m of it: what a user asking "is there a mug here?"
+gets) and identity-conditioned (its assigned track is not published: the earlier figure).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+from evaluation.metrics import present_objects, published_objects, ratio, squared_distance
+from evaluation.predictions import FramePrediction, MethodEvent
+from sim.truth import FrameTruth, ScheduledEvent
+
+# The method event that shows a scheduled change was noticed, per scheduled event type.
+RECALLING_EVENT_TYPE = {
+    "appear": "confirm",
+    "move": "move",
+    "disappear": "remove",
+    "transfer": "reparent",
+}
+PRESENCE_RADIUS_M = 0.5  # the paper's 0.5 m gate: a node this close stands for the object
+
+
+@dataclass(frozen=True)
+class EventOutcome:
+    """What became of one scheduled change."""
+
+    event: ScheduledEvent
+    observable_frame: int | None  # first frame the change could be seen, None: never
+    recalled_frame: int | None  # first frame the method reflected it, at any latency
+    latency_batches: int | None  # batches from the observable batch to the recalling one
+    within_bound: bool  # recalled within the latency bound
+
+    @property
+    def recalled(self) -> bool:
+        """Reflected at all (the unbounded count)."""
+        return self.recalled_frame is not None
+
+
+@dataclass(frozen=True)
+class EventRecall:
+    """How many scheduled changes the method reflected within the bound, and how fast."""
+
+    recalled: int  # within the latency bound
+    total: int  # every scheduled change, observable or not
+    recalled_any: int  # at any latency before the run ends
+    unobservable: int  # changes no camera view ever showed
+    per_event: list[EventOutcome]
+    latency_bound_batches: int | None
+
+
+@dataclass(frozen=True)
+class FalseAbsence:
+    """How often a present, already acquired object is missing from the published graph."""
+
+    rate: float
+    absent: int
+    eligible: int
+    by_object: dict[str, int] = field(default_factory=dict)  # absent checkpoints per object
+
+
+def batch_of(frame: int, frames_per_batch: int) -> int:
+    """Index of the batch holding a frame (batches are consecutive runs of frames from 0)."""
+    return frame // frames_per_batch
+
+
+def event_recall(
+    scheduled: Sequence[ScheduledEvent],
+    method_events: Sequence[MethodEvent],
+    assignment: Mapping[str, str],
+    fixture_map: Mapping[str, str],
+    n_frames: int,
+    observable_frames: Sequence[int | None] | None = None,
+    frames_per_batch: int = 2,
+    latency_bound_batches: int | None = None,
+) -> EventRecall:
+    """Scheduled changes answered by the right event of the object's track, and their latency.
+
+    A change is reflected at the first frame f, event.frame <= f < n_frames, at which the
+    object's assigned track emits: appear -> "confirm"; move -> "move"; disappear -> "remove";
+    transfer -> "reparent" with details["new_parent"] equal to fixture_map[event.parent]. An
+    object without an assigned track, or a transfer to an unmatched fixture, is never reflected.
+    Its latency is batch(f) - batch(observable frame), floored at 0 (a memory may act on less
+    evidence than the observability test asks for); without an observable frame it counts from
+    the scheduled frame. It is recalled when reflected with latency <= the bound (no bound:
+    whenever reflected). `total` counts every scheduled change, so an unobservable one is a
+    miss for every method, and the trace says why.
+    """
+    observable = list(observable_frames or [event.frame for event in scheduled])
+    outcomes: list[EventOutcome] = []
+    for event, seen_at in zip(scheduled, observable, strict=True):
+        if event.type not in RECALLING_EVENT_TYPE:
+            raise ValueError(f"unknown scheduled event type {event.type!r}")
+        track_id = assignment.get(event.object_id)
+        wanted_parent = fixture_map.get(event.parent) if event.parent is not None else None
+        frames = []
+        if track_id is not None and (event.type != "transfer" or wanted_parent is not None):
+            frames = [
+                method_event.frame
+                for method_event in method_events
+                if method_event.type == RECALLING_EVENT_TYPE[event.type]
+                and method_event.track_id == track_id
+                and event.frame <= method_event.frame < n_frames
+                and (
+                    event.type != "transfer"
+                    or method_event.details.get("new_parent") == wanted_parent
+                )
+            ]
+        recalled_frame = min(frames, default=None)
+        latency = None
+        if recalled_frame is not None:
+            start = event.frame if seen_at is None else seen_at
+            latency = max(
+                0, batch_of(recalled_frame, frames_per_batch) - batch_of(start, frames_per_batch)
+            )
+        within = latency is not None and (
+            latency_bound_batches is None or latency <= latency_bound_batches
+        )
+        outcomes.append(EventOutcome(event, seen_at, recalled_frame, latency, within))
+    return EventRecall(
+        recalled=sum(outcome.within_bound for outcome in outcomes),
+        total=len(outcomes),
+        recalled_any=sum(outcome.recalled for outcome in outcomes),
+        unobservable=sum(outcome.observable_frame is None for outcome in outcomes),
+        per_event=outcomes,
+        latency_bound_batches=latency_bound_batches,
+    )
+
+
+def _check_aligned(truth: Sequence[FrameTruth], predictions: Sequence[FramePrediction]) -> None:
+    if len(truth) != len(predictions):
+        raise ValueError(f"{len(truth)} truth frames but {len(predictions)} prediction frames")
+
+
+def false_absence(
+    truth: Sequence[FrameTruth],
+    predictions: Sequence[FramePrediction],
+    assignment: Mapping[str, str],
+) -> FalseAbsence:
+    """Identity-conditioned: share of post-acquisition checkpoints whose assigned track is unpublished.
+
+    A checkpoint (object, frame) is eligible when the object is present at that frame, has an
+    assigned track, and that track was published at some strictly earlier frame. absent counts
+    eligible checkpoints where the track is not published; rate = absent / eligible (0.0 when
+    nothing is eligible).
+    """
+    _check_aligned(truth, predictions)
+    acquired_tracks: set[str] = set()
+    absent = eligible = 0
+    by_object: Counter[str] = Counter()
+    for frame_truth, frame_prediction in zip(truth, predictions, strict=True):
+        published = {node.track_id for node in published_objects(frame_prediction)}
+        for truth_object in present_objects(frame_truth):
+            track_id = assignment.get(truth_object.object_id)
+            if track_id in acquired_tracks:
+                eligible += 1
+                if track_id not in published:
+                    absent += 1
+                    by_object[truth_object.object_id] += 1
+        # Updated after the checks: acquisition counts only from the NEXT frame on.
+        acquired_tracks |= published & set(assignment.values())
+    return FalseAbsence(ratio(absent, eligible), absent, eligible, dict(by_object))
+
+
+def class_false_absence(
+    truth: Sequence[FrameTruth],
+    predictions: Sequence[FramePrediction],
+    max_distance: float = PRESENCE_RADIUS_M,
+) -> FalseAbsence:
+    """Identity-agnostic: share of post-acquisition checkpoints with no node of the class nearby.
+
+    An object is covered at a frame when some published object node has its label and a center
+    at most `max_distance` from its center. A checkpoint (object, frame) is eligible when the
+    object is present and was covered at some strictly earlier frame (the memory had acquired
+    it, wherever it was then); it is absent when the object is not covered. rate = absent /
+    eligible (0.0 when nothing is eligible).
+    """
+    _check_aligned(truth, predictions)
+    max_squared = max_distance**2
+    acquired: set[str] = set()
+    absent = eligible = 0
+    by_object: Counter[str] = Counter()
+    for frame_truth, frame_prediction in zip(truth, predictions, strict=True):
+        nodes = published_objects(frame_prediction)
+        covered_now = set()
+        for truth_object in present_objects(frame_truth):
+            covered = any(
+                node.label == truth_object.label
+                and squared_distance(node.center, truth_object.center) <= max_squared
+                for node in nodes
+            )
+            if covered:
+                covered_now.add(truth_object.object_id)
+            if truth_object.object_id in acquired:
+                eligible += 1
+                if not covered:
+                    absent += 1
+                    by_object[truth_object.object_id] += 1
+        acquired |= covered_now
+    return FalseAbsence(ratio(absent, eligible), absent, eligible, dict(by_object))
+
+
+def latency_summary(latencies: Sequence[int]) -> tuple[float, int] | None:
+    """Median and maximum of recalled events' latencies in batches (None when there are none)."""
+    if not latencies:
+        return None
+    ordered = sorted(latencies)
+    middle = len(ordered) // 2
+    median = (
+        float(ordered[middle])
+        if len(ordered) % 2
+        else (ordered[middle - 1] + ordered[middle]) / 2.0
+    )
+    return median, ordered[-1]

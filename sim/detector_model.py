@@ -1,0 +1,204 @@
+"""The realistic detector: what the evaluation's streams, the robot and the demo all see.
+
+Per frame, in a fixed order: every latent of the detector's luck advances; each visible object
+is reported with its viewpoint recall (`sim.detectability`), its mask bleeds onto its support,
+leaks, or covers only a part or is split in two (`sim.masks`), its label may flicker to a
+confusable class, and its embedding is CLIP-like (`sim.appearance`); people are reported when
+the scenario says as what; phantoms (posters, reflections) are reported from their cone of
+views; fixtures go through the open-vocabulary segmenter (`sim.fixture_segmenter`); and random
+false-positive blobs land on visible surfaces (`sim.spurious`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from sim.appearance import AppearanceModel
+from sim.detectability import DetectorLuck, ViewFactors, box_view_factors, recall_probability
+from sim.detector import SimDetection
+from sim.detector_settings import DetectorSpec, correlation_per_frame
+from sim.fixture_segmenter import FixtureSegmenter, fixture_luck_keys
+from sim.masks import bleed, leak, partial, split
+from sim.phantoms import PHANTOM_PREFIX, phantom_view
+from sim.render import Render
+from sim.scenario_spec import Scenario
+from sim.spurious import false_positives
+from sim.world import Box, World
+
+PERSON_PREFIX = "person-"  # object_id of a person detection: not a tracked object
+# A partial mask crops the object: this share of its instance and view parts turns into noise.
+PARTIAL_APPEARANCE_LOSS = 0.08
+
+
+def _object_frame_direction(box: Box, eye: np.ndarray) -> np.ndarray:
+    """Unit vector from the box to the camera, in the box's own (yawed) axes."""
+    offset = eye - np.asarray(box.center, dtype=np.float64)
+    offset /= max(float(np.linalg.norm(offset)), 1e-9)
+    cos_yaw, sin_yaw = math.cos(box.yaw), math.sin(box.yaw)
+    return np.array(
+        [cos_yaw * offset[0] + sin_yaw * offset[1], -sin_yaw * offset[0] + cos_yaw * offset[1],
+         offset[2]]
+    )  # fmt: skip
+
+
+class RealisticDetector:
+    """The detector of one run: it carries the latent luck of every thing from frame to frame."""
+
+    def __init__(self, scenario: Scenario, rng: np.random.Generator) -> None:
+        self.spec: DetectorSpec = scenario.detector
+        self.labels = scenario.object_labels
+        groups = self.spec.labels.confusable
+        self.partners = {
+            label: [other for other in group if other != label]
+            for group in groups
+            for label in group
+        }
+        self.appearance = AppearanceModel(self.spec.appearance, groups)
+        self.detected_as = {person.id: person.detected_as for person in scenario.people}
+        fixture_boxes = [spec.box() for spec in scenario.fixtures]
+        keys = [f"object/{spec.id}" for spec in scenario.objects]
+        keys += [f"person/{person.id}" for person in scenario.people]
+        keys += [f"phantom/{phantom.id}" for phantom in self.spec.phantoms]
+        keys += fixture_luck_keys(fixture_boxes)
+        correlation = correlation_per_frame(
+            self.spec.recall.miss_correlation_s, scenario.frame_period
+        )
+        self.luck = DetectorLuck(keys, correlation, rng)
+        self.segmenter = (
+            None if self.spec.fixtures is None else FixtureSegmenter(self.spec.fixtures, groups)
+        )
+
+    def detect(
+        self, render: Render, world: World, frame_index: int, rng: np.random.Generator
+    ) -> list[SimDetection]:
+        """Everything the detector reports in one frame."""
+        self.luck.step(rng)
+        detections = self._objects(render, world, rng)
+        detections += self._people(render, world, rng)
+        detections += self._phantoms(render, rng)
+        if self.segmenter is not None:
+            detections += self.segmenter.detect(render, world, rng, self.luck)
+        for blob in false_positives(
+            render,
+            world,
+            rng,
+            rate=self.spec.false_positives_per_frame,
+            labels=self.labels,
+            frame_index=frame_index,
+            score=self.spec.score,
+            embedding_dim=self.appearance.dim,
+        ):
+            detections.append(dataclasses.replace(blob, embedding=self.appearance.clutter(rng)))
+        return detections
+
+    # -- objects ------------------------------------------------------------------------------
+
+    def _objects(
+        self, render: Render, world: World, rng: np.random.Generator
+    ) -> list[SimDetection]:
+        visible = np.bincount(render.instance.ravel() + 1, minlength=len(world.objects) + 1)[1:]
+        surfaces = render.fixture_instance >= 0
+        eye = render.pose[:3, 3]
+        detections: list[SimDetection] = []
+        for index, box in enumerate(world.objects):
+            if visible[index] < self.spec.min_visible_pixels:
+                continue
+            factors = box_view_factors(box, int(visible[index]), render.camera, render.pose)
+            if not self._reported(f"object/{box.id}", factors):
+                continue
+            masks, cropped = self._object_masks(render.instance == index, surfaces, rng)
+            direction = _object_frame_direction(box, eye)
+            for mask in masks:
+                embedding = self.appearance.embed(
+                    box.id, box.label, direction, rng, PARTIAL_APPEARANCE_LOSS if cropped else 0.0
+                )
+                label = self._reported_label(box.label, rng)
+                detections.append(SimDetection(box.id, label, self.spec.score, mask, embedding))
+        return detections
+
+    def _reported(self, key: str, factors: ViewFactors, scale: float = 1.0) -> bool:
+        return self.luck.passes(key, scale * recall_probability(factors, self.spec.recall))
+
+    def _object_masks(
+        self, mask: np.ndarray, surfaces: np.ndarray, rng: np.random.Generator
+    ) -> tuple[list[np.ndarray], bool]:
+        """The masks a segmenter returns for one object, and whether they crop it."""
+        spec = self.spec.masks
+        # A fixed number of draws per reported object keeps the stream aligned across settings.
+        spill, spill_px = (
+            rng.random(),
+            int(rng.integers(spec.support_bleed_px[0], spec.support_bleed_px[1] + 1)),
+        )
+        cut, keep, angle = rng.random(), rng.uniform(*spec.partial_keep), rng.uniform(0, math.pi)
+        if spill < spec.support_bleed_rate:
+            mask = bleed(mask, surfaces, spill_px)
+        mask = leak(mask, spec.boundary_leak_px)
+        masks, cropped = [mask], False
+        if cut < spec.split_rate:
+            masks, cropped = list(split(mask, angle)), True
+        elif cut < spec.split_rate + spec.partial_rate:
+            masks, cropped = [partial(mask, keep, angle)], True
+        return [m for m in masks if m.sum() >= self.spec.min_visible_pixels], cropped
+
+    def _reported_label(self, label: str, rng: np.random.Generator) -> str:
+        """The label a detection carries: its own, a confusable partner's, or rarely any other."""
+        spec = self.spec.labels
+        draw, pick = rng.random(), rng.random()
+        partners = self.partners.get(label, [])
+        if partners and draw < spec.flicker:
+            return partners[int(pick * len(partners))]
+        others = [other for other in self.labels if other != label]
+        if others and spec.flicker <= draw < spec.flicker + spec.confusion:
+            return others[int(pick * len(others))]
+        return label
+
+    # -- people and phantoms ------------------------------------------------------------------
+
+    def _people(self, render: Render, world: World, rng: np.random.Generator) -> list[SimDetection]:
+        if render.occluder_instance is None:
+            return []
+        visible = np.bincount(
+            render.occluder_instance.ravel() + 1, minlength=len(world.occluders) + 1
+        )[1:]
+        detections = []
+        for index, box in enumerate(world.occluders):
+            if box.kind != "person" or visible[index] < self.spec.min_visible_pixels:
+                continue
+            detected_as = self.detected_as.get(box.id)
+            if detected_as is None:
+                continue  # a walker the detector is not prompted for
+            factors = box_view_factors(box, int(visible[index]), render.camera, render.pose)
+            if not self._reported(f"person/{box.id}", factors):
+                continue
+            mask = leak(render.occluder_instance == index, self.spec.masks.boundary_leak_px)
+            direction = _object_frame_direction(box, render.pose[:3, 3])
+            embedding = self.appearance.embed(box.id, detected_as, direction, rng)
+            detections.append(
+                SimDetection(
+                    f"{PERSON_PREFIX}{box.id}", detected_as, self.spec.score, mask, embedding
+                )
+            )
+        return detections
+
+    def _phantoms(self, render: Render, rng: np.random.Generator) -> list[SimDetection]:
+        detections = []
+        for phantom in self.spec.phantoms:
+            view = phantom_view(phantom, render)
+            if view is None or view.factors.pixels < self.spec.min_visible_pixels:
+                continue
+            if not self._reported(f"phantom/{phantom.id}", view.factors, phantom.recall):
+                continue
+            embedding = self.appearance.embed(phantom.id, phantom.label, view.direction, rng)
+            detections.append(
+                SimDetection(
+                    f"{PHANTOM_PREFIX}{phantom.id}",
+                    phantom.label,
+                    self.spec.score,
+                    view.mask,
+                    embedding,
+                )
+            )
+        return detections
