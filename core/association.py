@@ -1,13 +1,21 @@
-"""Dynamic association front end (section 3.3, "Type-specific association")."""
+"""Dynamic association front end (section 3.3, "Type-specific association").
+
+Proposals match tracks by class compatibility, 3D distance < 0.8 m and appearance cosine > 0.78
+(omitted when an embedding is missing), greedily one to one. A detector's label flickers between
+confusable classes (cup/mug), so class agreement is the compatibility of the proposal's class
+scores with the track's class belief, not equality of two labels. Then the unique-class fallback
+recovers an identity after large motion, but only of a track whose absence is established.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
+from core.belief import class_compatibility, class_distribution
 from core.geometry import Proposal
 from core.params import AssociationParams
 
@@ -20,12 +28,13 @@ class CandidatePool:
 
     track_ids: Sequence[str]
     kinds: Sequence[str]
-    labels: Sequence[str]
+    class_belief_of: Callable[[int], Mapping[str, float]]  # p_cls of a row, fetched lazily
     centers: FloatArray  # (n, 3)
     embedding_of: Callable[[int], FloatArray | None]
     eligible: npt.NDArray[np.bool_] | None = None  # rows that may be matched (None: all)
-    # Rows whose identity was ever published: only those are recovered by the fallback, so a
-    # retired false positive of the same class cannot make a moved object's class look shared.
+    # Rows the fallback may recover: identities that were published and whose absence is
+    # established (removed, demoted, or missed where they were). A track still in place, or a
+    # retired false positive, never lends its identity to an object seen elsewhere.
     recoverable: npt.NDArray[np.bool_] | None = None
 
 
@@ -49,9 +58,15 @@ def associate(
         near = distances < params.max_center_distance_m
         if pool.eligible is not None:
             near &= pool.eligible
+        observed = class_distribution(proposal.label, proposal.class_scores)
         for i in (int(k) for k in np.flatnonzero(near)):
-            if pool.kinds[i] != proposal.kind or pool.labels[i] != proposal.label:
-                continue  # class agreement
+            if pool.kinds[i] != proposal.kind:
+                continue
+            if (
+                class_compatibility(pool.class_belief_of(i), observed)
+                < params.min_class_compatibility
+            ):
+                continue
             if not appearance_agrees(
                 pool.embedding_of(i), proposal.embedding, params.min_appearance_cosine
             ):
@@ -64,41 +79,95 @@ def associate(
         matches[j] = track_id
         used_tracks.add(track_id)
     if params.unique_class_fallback:
-        matches.update(_unique_class_fallback(proposals, pool, matches, used_tracks, params))
+        matches.update(_fallback(proposals, pool, matches, used_tracks, params))
     return matches
 
 
-def _unique_class_fallback(
+def _fallback(
     proposals: Sequence[Proposal],
     pool: CandidatePool,
     matches: dict[int, str],
     used_tracks: set[str],
     params: AssociationParams,
 ) -> dict[int, str]:
-    """After large motion: one unmatched proposal and one unmatched track of a class pair up."""
-    free_proposals: dict[tuple[str, str], list[int]] = {}
-    for j, proposal in enumerate(proposals):
-        if j not in matches:
-            free_proposals.setdefault((proposal.kind, proposal.label), []).append(j)
-    if not free_proposals:
+    """After large motion: an unmatched proposal recovers a missing track of its class.
+
+    Candidates are the recoverable tracks of a compatible class. With appearance on both sides,
+    the most similar one wins when it passes the gate and beats the runner-up by the margin (the
+    re-identification that lets a carried mug keep its identity among other mugs). Without it,
+    the pairing must be unique: one unmatched proposal of the class and one candidate.
+    """
+    if pool.recoverable is None or not pool.recoverable.any():
         return {}
-    free_tracks: dict[tuple[str, str], list[int]] = {}
-    for i, track_id in enumerate(pool.track_ids):
-        key = (pool.kinds[i], pool.labels[i])
-        if pool.eligible is not None and not pool.eligible[i]:
-            continue
-        if pool.recoverable is not None and not pool.recoverable[i]:
-            continue
-        if key in free_proposals and track_id not in used_tracks:
-            free_tracks.setdefault(key, []).append(i)
+    candidates = [
+        i
+        for i in np.flatnonzero(pool.recoverable)
+        if pool.track_ids[int(i)] not in used_tracks
+        and (pool.eligible is None or pool.eligible[int(i)])
+    ]
+    free = [j for j in range(len(proposals)) if j not in matches]
     recovered: dict[int, str] = {}
-    for key, proposal_indices in free_proposals.items():
-        track_indices = free_tracks.get(key, [])
-        if len(proposal_indices) != 1 or len(track_indices) != 1:
+    taken: set[int] = set()
+    for j in free:
+        proposal = proposals[j]
+        observed = class_distribution(proposal.label, proposal.class_scores)
+        same_class = [
+            int(i)
+            for i in candidates
+            if int(i) not in taken
+            and pool.kinds[int(i)] == proposal.kind
+            and class_compatibility(pool.class_belief_of(int(i)), observed)
+            >= params.min_class_compatibility
+        ]
+        if not same_class:
             continue
-        j, i = proposal_indices[0], track_indices[0]
-        if appearance_agrees(
-            pool.embedding_of(i), proposals[j].embedding, params.min_appearance_cosine
-        ):
-            recovered[j] = pool.track_ids[i]
+        choice = _by_appearance(proposal, same_class, pool, params)
+        if choice is None:
+            rivals = [
+                k
+                for k in free
+                if k != j
+                and proposals[k].kind == proposal.kind
+                and class_compatibility(
+                    class_distribution(proposals[k].label, proposals[k].class_scores), observed
+                )
+                >= params.min_class_compatibility
+            ]
+            if (
+                len(same_class) != 1
+                or rivals
+                or not _appearance_allows(proposal, same_class[0], pool, params)
+            ):
+                continue
+            choice = same_class[0]
+        recovered[j] = pool.track_ids[choice]
+        taken.add(choice)
     return recovered
+
+
+def _by_appearance(
+    proposal: Proposal, rows: Sequence[int], pool: CandidatePool, params: AssociationParams
+) -> int | None:
+    """The row whose appearance passes the gate and beats every other by the margin, if any."""
+    if proposal.embedding is None:
+        return None
+    scored = []
+    for row in rows:
+        embedding = pool.embedding_of(row)
+        if embedding is None or embedding.shape != proposal.embedding.shape:
+            return None  # one candidate cannot be compared: appearance cannot decide
+        scored.append((float(embedding @ proposal.embedding), row))
+    scored.sort(reverse=True)
+    best, row = scored[0]
+    runner_up = scored[1][0] if len(scored) > 1 else -1.0
+    if best > params.min_appearance_cosine and best - runner_up >= params.fallback_margin:
+        return row
+    return None
+
+
+def _appearance_allows(
+    proposal: Proposal, row: int, pool: CandidatePool, params: AssociationParams
+) -> bool:
+    return appearance_agrees(
+        pool.embedding_of(row), proposal.embedding, params.min_appearance_cosine
+    )

@@ -1,13 +1,20 @@
-"""What one batch says about each track: matched proposals, fixture clusters, best visibility."""
+"""What one batch says about each track: matched proposals, fixture clusters, best visibility.
+
+Its work is bounded by the tracks in play near the camera, not by the scene's history: retired
+hypotheses are not in the state's columns at all, the visibility gate samples only the boxes
+that can be in view, and events are decided only for tracks the batch has evidence about.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
 
 from core.association import CandidatePool
+from core.belief import class_distribution
 from core.events import Event
 from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
@@ -21,9 +28,10 @@ from core.transitions import (
     added_object,
     observed_fixture,
     observed_object,
+    retired,
     visible_miss,
 )
-from core.visibility import is_visible, samples_passed
+from core.visibility import Sighting, in_view_rows, observable, samples_passed
 
 FloatArray = npt.NDArray[np.float64]
 
@@ -38,47 +46,44 @@ class BatchEvidence:
     observations: dict[str, list[Proposal]] = field(default_factory=dict)
     fixtures: dict[str, FixtureProposal] = field(default_factory=dict)
     new_track_ids: list[str] = field(default_factory=list)
-    visibility: dict[str, tuple[int, str]] = field(default_factory=dict)  # best (samples, frame)
+    visibility: dict[str, Sighting] = field(default_factory=dict)  # best view of each track
     last_frame: str = ""
     last_timestamp: float = 0.0
 
     def __post_init__(self) -> None:
         arrays = self.state.arrays
-        tracks = self.state.tracks
         self._ids = list(arrays.track_ids)
-        self._kinds = [tracks[i].kind for i in self._ids]
-        self._labels = [tracks[i].label for i in self._ids]
+        self._kinds: list[str] = list(arrays.kinds)
         self._centers = arrays.centers.copy()
         self._row = {track_id: row for row, track_id in enumerate(self._ids)}
         self._embeddings: dict[int, FloatArray | None] = {}
-        # Removed and retired tracks get no negative evidence.
-        self._live_rows = np.array(
-            [
-                tracks[i].lifecycle != "removed" and tracks[i].verification != "rejected"
-                for i in self._ids
-            ],
-            dtype=bool,
-        )
+        self._beliefs: dict[int, Mapping[str, float]] = {}
+        self._live_rows = ~arrays.gone  # removed and rejected tracks get no negative evidence
         self._surfaces: list[SupportSurface] | None = None
         self._eligible: npt.NDArray[np.bool_] | None = None
-        self._published = np.array(
-            [tracks[i].published_center is not None for i in self._ids], dtype=np.bool_
-        )
 
     # -- association pool ---------------------------------------------------------------------
 
     def pool(self) -> CandidatePool:
-        """Every track so far, with this batch's latest centers."""
+        """Every track in play, with this batch's latest centers."""
+        arrays = self.state.arrays
+        extra = len(self._ids) - len(arrays.track_ids)  # tracks created in this batch
         eligible = None
-        if self._eligible is not None:  # tracks created in this batch are always eligible
-            extra = len(self._ids) - len(self._eligible)
+        if self._eligible is not None:
             eligible = np.concatenate((self._eligible, np.ones(extra, dtype=np.bool_)))
-        recoverable = np.zeros(len(self._ids), dtype=np.bool_)
-        recoverable[: len(self._published)] = self._published
+        # Absence established: removed or demoted, or its place seen empty in enough batches
+        # (this one counting once when it showed the place and no proposal matched the track).
+        seen_empty = np.zeros(len(arrays.track_ids), dtype=np.int64)
+        for track_id, sighting in self.visibility.items():
+            if track_id not in self.observations and observable(sighting, self.params.visibility):
+                seen_empty[self._row[track_id]] = 1
+        misses = arrays.visible_misses + seen_empty
+        absent = arrays.missing | (misses >= self.params.association.fallback_min_misses)
+        recoverable = np.concatenate((arrays.published & absent, np.zeros(extra, dtype=np.bool_)))
         return CandidatePool(
             self._ids,
             self._kinds,
-            self._labels,
+            self._class_belief_of,
             self._centers,
             self._embedding_of,
             eligible,
@@ -90,35 +95,36 @@ class BatchEvidence:
         memory = self.rules.identity_memory_s
         if memory is None:
             return
-        horizon = timestamp - memory
-        eligible = []
-        for track_id in self.state.arrays.track_ids:
-            track = self.state.tracks[track_id]
-            seen = track.last_observed
-            eligible.append(track.lifecycle != "removed" and seen is not None and seen >= horizon)
-        self._eligible = np.array(eligible, dtype=np.bool_)
+        arrays = self.state.arrays
+        with np.errstate(invalid="ignore"):
+            recent = arrays.last_observed >= timestamp - memory  # NaN (never seen): False
+        self._eligible = ~arrays.gone & recent
 
     def _embedding_of(self, row: int) -> FloatArray | None:
         if row not in self._embeddings:
             track = self.state.tracks.get(self._ids[row])
             if track is not None:
                 self._embeddings[row] = track.embedding()
-            else:
-                first = (
-                    self.observations[self._ids[row]][0]
-                    if self._ids[row] in self.observations
-                    else None
-                )
-                self._embeddings[row] = None if first is None else first.embedding
+            else:  # created in this batch: its first proposal's appearance
+                self._embeddings[row] = self.observations[self._ids[row]][0].embedding
         return self._embeddings[row]
 
-    def _new_id(self, kind: TrackKind, label: str, center: FloatArray) -> str:
+    def _class_belief_of(self, row: int) -> Mapping[str, float]:
+        if row not in self._beliefs:
+            track = self.state.tracks.get(self._ids[row])
+            if track is not None:
+                self._beliefs[row] = track.class_probabilities()
+            else:
+                first = self.observations[self._ids[row]][0]
+                self._beliefs[row] = class_distribution(first.label, first.class_scores)
+        return self._beliefs[row]
+
+    def _new_id(self, kind: TrackKind, center: FloatArray) -> str:
         track_id = f"trk-{self.state.next_track_number + len(self.new_track_ids):06d}"
         self.new_track_ids.append(track_id)
         self._row[track_id] = len(self._ids)
         self._ids.append(track_id)
         self._kinds.append(kind)
-        self._labels.append(label)
         self._centers = np.vstack((self._centers, center[None, :]))
         return track_id
 
@@ -126,7 +132,7 @@ class BatchEvidence:
 
     def new_track(self, proposal: Proposal) -> str:
         """Identity for an object proposal no track explains: a new hypothesis."""
-        return self._new_id(proposal.kind, proposal.label, proposal.center)
+        return self._new_id(proposal.kind, proposal.center)
 
     def observe(self, track_id: str, proposal: Proposal) -> None:
         """A proposal matched (or created) this track; later frames gate on its latest center."""
@@ -136,38 +142,47 @@ class BatchEvidence:
     def observe_fixture(self, track_id: str | None, proposal: FixtureProposal) -> None:
         """A fixture cluster this batch supported: for its track, or a new hypothesis."""
         if track_id is None:
-            track_id = self._new_id("fixture", proposal.label, proposal.center)
+            track_id = self._new_id("fixture", proposal.center)
         self.fixtures[track_id] = proposal
 
     def record_visibility(self, frame: Frame) -> None:
-        """Keep, per live track, the frame where most box samples passed the gate."""
+        """Keep, per live track that could be in view, its best view of this batch."""
         self.last_frame, self.last_timestamp = frame.frame_id, frame.timestamp
         arrays = self.state.arrays
-        if not arrays.track_ids:
+        rows = in_view_rows(arrays.centers, arrays.extents, frame, self.params.visibility)
+        rows = rows[self._live_rows[rows]]
+        if rows.size == 0:
             return
-        passed = samples_passed(
-            arrays.centers,
-            arrays.extents,
+        sightings = samples_passed(
+            arrays.centers[rows],
+            arrays.extents[rows],
             frame,
             self.params.visibility,
             self.rules.visibility_gate,
+            self.rules.miss_evidence,
         )
-        for row in np.flatnonzero((passed > 0) & self._live_rows):
+        for row, sighting in zip(rows, sightings, strict=True):
+            if sighting.passed == 0:
+                continue
             track_id = arrays.track_ids[row]
             best = self.visibility.get(track_id)
-            if best is None or passed[row] > best[0]:
-                self.visibility[track_id] = (int(passed[row]), frame.frame_id)
+            if best is None or sighting.better_than(best):
+                self.visibility[track_id] = sighting.seen_in(frame.frame_id)
 
     def surfaces(self) -> list[SupportSurface]:
         """Fixture tops objects may rest on, with this batch's fixture geometry."""
         if self._surfaces is None:
+            arrays = self.state.arrays
+            fixture_ids = {
+                i
+                for i, kind in zip(arrays.track_ids, arrays.kinds, strict=True)
+                if kind == "fixture"
+            }
             surfaces = []
-            for track_id in sorted(set(self.state.tracks) | set(self.fixtures)):
+            for track_id in sorted(fixture_ids | set(self.fixtures)):
                 track = self.state.tracks.get(track_id)
                 proposal = self.fixtures.get(track_id)
-                if track is not None and (
-                    track.kind != "fixture" or track.verification == "rejected"
-                ):
+                if track is not None and track.verification == "rejected":
                     continue
                 if track is not None and track.lifecycle == "removed" and proposal is None:
                     continue
@@ -177,17 +192,9 @@ class BatchEvidence:
                             track.center, proposal.center, self.params.fusion.fixture_center_alpha
                         )
                         if track is not None and track.lifecycle != "removed"
-                        else (
-                            float(proposal.center[0]),
-                            float(proposal.center[1]),
-                            float(proposal.center[2]),
-                        )
+                        else vec(proposal.center)
                     )
-                    extent = (
-                        float(proposal.extent[0]),
-                        float(proposal.extent[1]),
-                        float(proposal.extent[2]),
-                    )
+                    extent = vec(proposal.extent)
                 else:
                     assert track is not None
                     center, extent = track.center, track.extent
@@ -209,7 +216,9 @@ class BatchEvidence:
             else:
                 proposals = self.observations[track_id]
                 emitted += added_object(track_id, proposals, self._parents(proposals), params)
-        for track_id in sorted(self.state.tracks):
+        stale = set(self._stale_hypotheses())
+        concerned = set(self.fixtures) | set(self.observations) | set(self.visibility) | stale
+        for track_id in sorted(concerned - set(self.new_track_ids)):
             track = self.state.tracks[track_id]
             if track_id in self.fixtures:
                 emitted += observed_fixture(
@@ -218,14 +227,52 @@ class BatchEvidence:
             elif track_id in self.observations:
                 proposals = self.observations[track_id]
                 emitted += observed_object(track, proposals, self._parents(proposals), params)
-            elif track_id in self.visibility and is_visible(
-                self.visibility[track_id][0], params.visibility
+            elif track_id in self.visibility and observable(
+                self.visibility[track_id], params.visibility, self.rules.visibility_gate
             ):
+                sighting = self.visibility[track_id]
                 emitted += visible_miss(
-                    track, *self.visibility[track_id], params, self.rules.removal
+                    track, sighting.passed, sighting.frame_id, params, self.rules.removal
+                )
+            if _removed_unpublished(emitted, track_id, track.published_center):
+                emitted += retired(track, self.last_frame, "removed")
+            elif track_id in stale:
+                emitted += retired(
+                    track, self.last_frame, "removed" if track.lifecycle == "removed" else "unseen"
                 )
         return emitted
+
+    def _stale_hypotheses(self) -> list[str]:
+        """Hypotheses never published: removed ones, and those unseen for too long (section 3.3:
+        raw hypotheses are unpublished tracks; these no longer count as any)."""
+        arrays = self.state.arrays
+        horizon = self.last_timestamp - self.params.lifecycle.retire_unseen_hypothesis_s
+        with np.errstate(invalid="ignore"):
+            unseen = arrays.unpublished_tentative & ~(arrays.last_observed >= horizon)
+        removed_unpublished = arrays.gone & ~arrays.published
+        rows = np.flatnonzero(unseen | removed_unpublished)
+        return [
+            arrays.track_ids[row]
+            for row in rows
+            if arrays.track_ids[row] not in self.observations
+            and arrays.track_ids[row] not in self.fixtures
+            and self.state.tracks[arrays.track_ids[row]].verification != "pending"
+        ]
 
     def _parents(self, proposals: list[Proposal]) -> list[str | None]:
         surfaces = self.surfaces()
         return [support_of(p.center, p.bottom_z, surfaces, self.params.fixtures) for p in proposals]
+
+
+def _removed_unpublished(events: list[Event], track_id: str, published: object) -> bool:
+    """A hypothesis this batch removed, never published: it retires at once."""
+    return (
+        published is None
+        and bool(events)
+        and events[-1].track_id == track_id
+        and events[-1].type == "remove"
+    )
+
+
+def vec(values: FloatArray) -> tuple[float, float, float]:
+    return (float(values[0]), float(values[1]), float(values[2]))

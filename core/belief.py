@@ -1,6 +1,8 @@
-"""Existence log-odds, equation (3) (section 3.3, "Visibility-gated existence")."""
+"""Evidence: existence log-odds (equation (3)) and class evidence (section 3.3)."""
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 from core.params import ExistenceParams
 
@@ -27,3 +29,24 @@ def update_existence(
         - params.eta_rejected * rejected
     )
     return min(params.logodds_max, max(params.logodds_min, updated))
+
+
+def class_distribution(label: str, scores: Mapping[str, float] | None) -> dict[str, float]:
+    """A detection's class evidence: its scores clipped at 0 and normalized, else its label.
+
+    An ordinary observation adds unit evidence (section 3.3); spread over the classes the
+    detector scored, so that a label flickering between confusable classes (cup/mug) builds one
+    class belief instead of two tracks.
+    """
+    if scores:
+        positive = {name: max(float(value), 0.0) for name, value in scores.items()}
+        positive[label] = positive.get(label, 0.0)
+        total = sum(positive.values())
+        if total > 0:
+            return {name: value / total for name, value in sorted(positive.items()) if value > 0}
+    return {label: 1.0}
+
+
+def class_compatibility(belief: Mapping[str, float], observed: Mapping[str, float]) -> float:
+    """How likely a track and a detection name the same class: sum_c p_track(c) q_det(c)."""
+    return sum(p * observed.get(name, 0.0) for name, p in belief.items())

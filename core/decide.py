@@ -30,13 +30,15 @@ def decide(
     for frame in batch.frames:
         # 2. Grounded observations: back-project each object mask's valid depth (section 3.2).
         proposals = ground_frame(frame, params)
-        # 3. Dynamic association: class, 3D distance < 0.8 m, appearance > 0.78, greedy 1:1,
-        #    unique-class fallback; removed tracks take part (section 3.3).
+        # 3. Visibility gate: samples of each stored box that could be in view; a track left
+        #    unmatched in a frame that showed it is a visible miss (section 3.3).
+        evidence.record_visibility(frame)
+        # 4. Dynamic association: class compatibility, 3D distance < 0.8 m, appearance > 0.78,
+        #    greedy 1:1, then the unique-class fallback for tracks whose absence is established;
+        #    removed tracks take part (section 3.3).
         matches = associate(proposals, evidence.pool(), params.association)
         for j, proposal in enumerate(proposals):
             evidence.observe(matches.get(j) or evidence.new_track(proposal), proposal)
-        # 4. Visibility gate for the tracks not matched: samples of the stored box.
-        evidence.record_visibility(frame)
     # 5. One existence update per track per batch (equation (3)), support parents from
     #    geometry, then lifecycle events.
     head = [fixtures.evidence_event] if fixtures.evidence_event is not None else []

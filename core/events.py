@@ -42,6 +42,7 @@ __all__ = [
     "TrackObserved",
     "TrackRemoved",
     "TrackReparented",
+    "TrackRetired",
     "TrackUpdated",
     "TrackVerified",
     "VerificationRequested",
@@ -76,6 +77,9 @@ class Observation:
     extent: Vec3
     valid_pixels: int  # inlier pixels of an object mask; voxels of a fixture cluster
     parent: str | None  # support parent from geometry, None when on nothing known
+    # The detector's scores of other classes, when it gave them: the observation's unit of
+    # class evidence is spread over them (older logs: the label alone).
+    class_scores: Annotated[Mapping[str, float] | None, Omitted] = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -267,6 +271,10 @@ class ObjectObserved(TrackObserved):
     batches_observed: int
     reacquired: bool  # a removed track recovered its identity and restarts as a hypothesis
     parent_evidence: Mapping[str, float]  # after this batch (reset when the object relocated)
+    # False: matched inside the gate but neither at the track's place nor confirmed by
+    # appearance. The center follows it; existence and the miss count do not change (older
+    # logs: every match corroborates).
+    corroborated: Annotated[bool | None, Omitted] = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -350,6 +358,16 @@ class TrackRemoved(TrackEvent):
     p_exist: float
     visible_misses: Annotated[int | None, Omitted] = None
     reason: Annotated[Literal["verification_rejected"] | None, Omitted] = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackRetired(TrackEvent):
+    """A hypothesis never published and no longer believed leaves the memory in play for good:
+    removed by visible misses, or unseen for `retire_unseen_hypothesis_s`."""
+
+    type: ClassVar[str] = "retire"
+    reason: Literal["removed", "unseen"]
+    last_observed: float | None
 
 
 # -- verification, inspection ------------------------------------------------------------------

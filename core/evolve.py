@@ -5,6 +5,7 @@ from __future__ import annotations
 import operator
 from collections.abc import Iterable
 
+from core.belief import class_distribution
 from core.events import (
     BaselineFrozen,
     BaselineLoaded,
@@ -22,6 +23,7 @@ from core.events import (
     TrackMoved,
     TrackRemoved,
     TrackReparented,
+    TrackRetired,
     TrackVerified,
     VerificationRequested,
     VisibleMiss,
@@ -88,7 +90,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 tracks[event.track_id] = tracks[event.track_id].evolved(published_center=event.to)
             case TrackReparented():
                 tracks[event.track_id] = tracks[event.track_id].evolved(parent=event.new_parent)
-            case TrackDemoted() | TrackRemoved():
+            case TrackDemoted() | TrackRemoved() | TrackRetired():
                 tracks[event.track_id] = tracks[event.track_id].evolved(lifecycle=event.state)
             case VerificationRequested():
                 tracks[event.track_id] = tracks[event.track_id].evolved(verification="pending")
@@ -162,7 +164,8 @@ def _observe(
     weight = params.fusion.observation_evidence_weight
     class_evidence = dict(track.class_evidence)
     for observation in observations:
-        class_evidence[observation.label] = class_evidence.get(observation.label, 0.0) + weight
+        for label, share in class_distribution(observation.label, observation.class_scores).items():
+            class_evidence[label] = class_evidence.get(label, 0.0) + weight * share
     centers = track.recent_centers + tuple(o.center for o in observations)
     embedding_sum = track.embedding_sum
     if event.embedding_sum is not None:
@@ -172,17 +175,22 @@ def _observe(
             else tuple(map(operator.add, embedding_sum, event.embedding_sum))
         )
     last = observations[-1]
+    misses = 0
     if isinstance(event, FixtureAdded | FixtureObserved):
-        # Fixtures: the EMA center, the best frame to crop, the class margin; no parents.
+        # Fixtures: the EMA center, the best frame to crop, the class margin (summed since the
+        # track was last acquired: a re-acquired fixture earns its consensus anew); no parents.
+        restart = isinstance(event, FixtureAdded) or event.reacquired
         fixture_fields = {
             "center": event.center,
             "best_frame": event.best_frame,
             "best_frame_support": event.best_frame_support,
-            "margin_sum": track.margin_sum + event.margin,
+            "margin_sum": (0.0 if restart else track.margin_sum) + event.margin,
             "parent_evidence": dict(track.parent_evidence),
         }
     else:
         fixture_fields = {"center": last.center, "parent_evidence": dict(event.parent_evidence)}
+        if isinstance(event, ObjectObserved) and event.corroborated is False:
+            misses = track.visible_misses  # an uncorroborated match leaves the misses standing
     return track.evolved(
         **fixture_fields,
         lifecycle=event.state,
@@ -195,5 +203,5 @@ def _observe(
         last_observed=event.timestamp,
         last_observed_frame=last.frame_id,
         batches_observed=event.batches_observed,
-        visible_misses=0,
+        visible_misses=misses,
     )

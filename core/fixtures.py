@@ -275,7 +275,7 @@ def associate_fixtures(
     for j, proposal in enumerate(proposals):
         box = proposal.footprint
         for track in tracks:
-            if track.label != proposal.label:
+            if not compatible(track.label, proposal, params):
                 continue
             distance = float(
                 np.hypot(track.center[0] - proposal.center[0], track.center[1] - proposal.center[1])
@@ -305,12 +305,24 @@ def associate_fixtures(
         for track_id in sorted(used):
             track = by_id[track_id]
             grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
-            if track.label == proposal.label and overlap_area(
+            if compatible(track.label, proposal, params) and overlap_area(
                 box, grown
             ) >= params.residual_containment * area(box):
                 absorbed[j] = track_id
                 break
     return matches, absorbed
+
+
+def compatible(track_label: str, proposal: FixtureProposal, params: FixtureParams) -> bool:
+    """Class agreement of a fixture track and a cluster: the same top class, or the track's
+    class within `compatible_class_margin` of the cluster's best mean similarity. A desk/table
+    the segmenter cannot tell apart stays one fixture whose class evidence says so (and the
+    consensus gate then asks for a verdict), instead of two fixtures in one place."""
+    if track_label == proposal.label:
+        return True
+    rival = proposal.class_means.get(track_label)
+    best = proposal.class_means.get(proposal.label)
+    return rival is not None and best is not None and best - rival <= params.compatible_class_margin
 
 
 def ema_center(

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,7 @@ class Proposal:
     timestamp: float
     bottom_z: float  # low percentile of the inlier heights: where the object rests
     detection_index: int = -1  # which detection of its frame it grounds
+    class_scores: Mapping[str, float] | None = None  # the detector's scores of other classes
 
 
 def backproject_pixels(
@@ -177,6 +179,7 @@ def ground_detection(
         timestamp=frame.timestamp,
         bottom_z=float(low[2]),
         detection_index=detection_index,
+        class_scores=detection.class_scores,
     )
 
 

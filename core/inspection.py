@@ -15,7 +15,7 @@ from core.association import associate
 from core.batch_evidence import BatchEvidence
 from core.decide import ground_frame
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
-from core.events import Event, InspectionRecorded, ObjectAdded, TrackConfirmed
+from core.events import Event, InspectionRecorded, ObjectAdded, ObjectObserved, TrackConfirmed
 from core.geometry import Proposal
 from core.masks import Mask, mask_iou
 from core.observation import Frame
@@ -33,7 +33,7 @@ def support_region_visible(fixture: Track, frame: Frame, params: Params) -> int:
     top = fixture.center[2] + fixture.extent[2] / 2
     center = np.array([[fixture.center[0], fixture.center[1], top]])
     extent = np.array([[fixture.extent[0], fixture.extent[1], SUPPORT_SLAB_M]])
-    return int(samples_passed(center, extent, frame, params.visibility)[0])
+    return samples_passed(center, extent, frame, params.visibility)[0].passed
 
 
 def suppress(proposals: Sequence[Proposal], masks: Sequence[Mask], params: Params) -> list[int]:
@@ -141,7 +141,26 @@ def _attach_children(
         parents = [fixture.track_id]
         track_id = matches.get(j)
         if track_id is not None and state.tracks[track_id].kind == "object":
-            events += observed_object(state.tracks[track_id], [proposal], parents, params)
+            observed = observed_object(state.tracks[track_id], [proposal], parents, params)
+            update = observed[0]
+            assert isinstance(update, ObjectObserved)
+            if update.state != "confirmed" and not any(
+                isinstance(e, TrackConfirmed) for e in observed
+            ):
+                # A child matched a hypothesis or a removed track: the verified capture publishes
+                # it, as it does a new child (a child listed as completed is always in the graph).
+                observed.insert(
+                    1,
+                    confirmed(
+                        track_id,
+                        frame.frame_id,
+                        update.p_exist,
+                        vec3(proposal.center),
+                        update.batches_observed,
+                        reason="inspection",
+                    ),
+                )
+            events += observed
         else:
             track_id = f"trk-{next_number:06d}"
             next_number += 1

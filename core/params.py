@@ -74,8 +74,20 @@ class AssociationParams:
     __pydantic_config__ = _CHECKED
     max_center_distance_m: PositiveMetres = 0.8
     min_appearance_cosine: Similarity = 0.78
+    # "Class agreement": the paper's detectors agree on a label; ours flicker between confusable
+    # classes (cup/mug), so agreement is sum_c p_track(c) q_det(c), the chance both name the
+    # same class, with q the detection's class scores normalized (its label alone without them).
+    # 0.2: a track seen as a mug agrees with a detection that scores cup 0.9 and mug 0.75 (0.45),
+    # not with one that never names a mug.
+    min_class_compatibility: Fraction = 0.2
     # Unique-class fallback: recover an identity after large motion when appearance agrees.
     unique_class_fallback: bool = True
+    # Among several missing tracks of a class, appearance must prefer one by this much: two
+    # instances of a class sit 0.70-0.85 apart in CLIP-like spaces, one instance 0.80-0.95.
+    fallback_margin: Fraction = 0.05
+    # Only a track whose absence is established lends its identity: removed or demoted, or its
+    # place seen empty in this many batches (one miss may be the detector's, not the object's).
+    fallback_min_misses: Annotated[int, Field(ge=1, le=1000)] = 2
 
 
 # The log-odds clamp may not exceed this: logistic() of it is still distinguishable from 1.
@@ -121,6 +133,13 @@ class VisibilityParams:
     # Samples of the stored box: a grid of n per axis (27 = corners, edge and face centres,
     # centre). At most 9 (729 samples per track) bounds the gate's work per frame.
     box_samples_per_axis: Annotated[int, Field(ge=1, le=9)] = 3
+    # Not in the paper: the missed-detection condition. A miss is evidence of absence only when
+    # the observable part of the box (its projection inside the image, times the share of its
+    # samples that passed) covers at least this share of the image: 0.0005 is about 150 pixels
+    # at 640 x 480, below which detectors rarely report a mask (COCO calls objects under 32 x 32
+    # pixels small and detects them worst). A sliver at the border, a grazing or a far view
+    # passes two samples of the gate but would not have been detected: it is not a miss.
+    min_expected_image_fraction: Fraction = 0.0005
 
     def __post_init__(self) -> None:
         if self.min_range_m >= self.max_range_m:
@@ -154,6 +173,15 @@ class LifecycleParams:
     demote_below_p_exist: Fraction = 0.30
     remove_at_most_p_exist: Fraction = 0.12
     remove_min_visible_misses: Annotated[int, Field(ge=1, le=1000)] = 3
+    # Not in the paper: a hypothesis never published and not seen again for this long retires
+    # (a false positive, a glimpse): it leaves the association pool and the visibility gate, so
+    # a frame's work is bounded by the memory in play, not by every blob ever seen.
+    retire_unseen_hypothesis_s: Annotated[float, Field(gt=0.0, le=1e9)] = 60.0
+    # Not in the paper: without appearance, a match resets the miss count (and adds existence
+    # evidence) only at the track's place: its center within the stored box grown by this.
+    # A same-label false positive elsewhere inside the 0.8 m gate then cannot keep a vanished
+    # object alive; a moved object is corroborated from its second sighting at the new place.
+    place_tolerance_m: Metres = 0.10
 
 
 SizeLimits = tuple[Metres, Metres, Metres, Metres, Metres, Metres]  # min dx, dy, dz, max dx, dy, dz
@@ -209,6 +237,10 @@ class FixtureParams:
     )
     # Association: same class, planar center distance, expanded-footprint coverage or IoU.
     max_planar_distance_m: PositiveMetres = 1.0
+    # Class agreement of a cluster and a track: the same class, or the track's class within
+    # this of the cluster's best mean similarity (a desk the segmenter scores 0.50 desk and
+    # 0.47 table agrees with a table track; a table scoring 0.9 table and 0.3 desk does not).
+    compatible_class_margin: Fraction = 0.05
     footprint_expand_m: Metres = 0.25
     min_expanded_coverage: Fraction = 0.6
     min_footprint_iou: Fraction = 0.25

@@ -8,6 +8,7 @@ miss increments) stay in `Params`; these are the ones that change a mechanism.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 
 @dataclass(frozen=True)
@@ -23,6 +24,9 @@ class UpdateRules:
     identity_memory_s: float | None = None
     # Removal and demotion at all (append-only memories never resolve a disappearance).
     removal: bool = True
+    # What a miss needs: the box observable and unoccluded ("visible", the paper's gate), or
+    # depth showing free space where the box was ("free_space", DynaMem's clearing rule).
+    miss_evidence: Literal["visible", "free_space"] = "visible"
 
 
 PAPER_RULES = UpdateRules()

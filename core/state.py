@@ -15,11 +15,13 @@ from core.params import Params
 from core.voxels import pack
 
 Vec3 = tuple[float, float, float]
-LifecycleState = Literal["tentative", "confirmed", "demoted", "removed"]
+# "retired": a hypothesis never published and no longer believed (a false positive, a glimpse):
+# it leaves the association pool and the visibility gate for good.
+LifecycleState = Literal["tentative", "confirmed", "demoted", "removed", "retired"]
 TrackKind = Literal["object", "fixture"]
 VerificationStatus = Literal["pending", "confirmed", "rejected"]
 InspectionStatus = Literal["completed", "abandoned"]
-SNAPSHOT_FORMAT_VERSION = 2
+SNAPSHOT_FORMAT_VERSION = 3
 VoxelKey = tuple[int, int, int]
 
 
@@ -176,11 +178,22 @@ def _vec3(values: Any) -> Vec3:
 
 @dataclass(frozen=True)
 class TrackArrays:
-    """Column view of the live tracks, built once per state for vectorized gates."""
+    """Columns of the tracks still in play (all but retired ones), in id order.
+
+    Built once per state, so that association, the visibility gate and the lifecycle rules work
+    on arrays whose length is the scene's live memory, not its history.
+    """
 
     track_ids: tuple[str, ...]
+    kinds: tuple[str, ...]
     centers: npt.NDArray[np.float64]  # (n, 3)
     extents: npt.NDArray[np.float64]  # (n, 3)
+    published: npt.NDArray[np.bool_]  # ever published (it has a published center)
+    gone: npt.NDArray[np.bool_]  # removed, or retired from dispute by a rejection
+    missing: npt.NDArray[np.bool_]  # removed or demoted: its absence is established
+    visible_misses: npt.NDArray[np.int64]  # visibility-admissible misses since last seen
+    unpublished_tentative: npt.NDArray[np.bool_]  # a hypothesis never published
+    last_observed: npt.NDArray[np.float64]  # tau_i (NaN when never)
 
 
 @dataclass(frozen=True)
@@ -227,14 +240,33 @@ class SceneState:
 
     @cached_property
     def arrays(self) -> TrackArrays:
-        """Centers and extents of every track in id order (removed ones included)."""
-        ids = tuple(sorted(self.tracks))
-        if not ids:
-            empty = np.zeros((0, 3), dtype=np.float64)
-            return TrackArrays(ids, empty, empty)
-        centers = np.array([self.tracks[i].center for i in ids], dtype=np.float64)
-        extents = np.array([self.tracks[i].extent for i in ids], dtype=np.float64)
-        return TrackArrays(ids, centers, extents)
+        """Columns of every track but retired ones, in id order."""
+        live = [self.tracks[i] for i in sorted(self.tracks)]
+        live = [t for t in live if t.lifecycle != "retired"]
+        count = len(live)
+        centers = np.array([t.center for t in live], dtype=np.float64).reshape(count, 3)
+        extents = np.array([t.extent for t in live], dtype=np.float64).reshape(count, 3)
+        return TrackArrays(
+            track_ids=tuple(t.track_id for t in live),
+            kinds=tuple(t.kind for t in live),
+            centers=centers,
+            extents=extents,
+            published=np.array([t.published_center is not None for t in live], dtype=np.bool_),
+            gone=np.array(
+                [t.lifecycle == "removed" or t.verification == "rejected" for t in live],
+                dtype=np.bool_,
+            ),
+            missing=np.array([t.lifecycle in ("removed", "demoted") for t in live], dtype=np.bool_),
+            visible_misses=np.array([t.visible_misses for t in live], dtype=np.int64),
+            unpublished_tentative=np.array(
+                [t.lifecycle == "tentative" and t.published_center is None for t in live],
+                dtype=np.bool_,
+            ),
+            last_observed=np.array(
+                [np.nan if t.last_observed is None else t.last_observed for t in live],
+                dtype=np.float64,
+            ),
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """Canonical JSON-able form: snapshots store it, tests compare it."""

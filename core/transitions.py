@@ -21,6 +21,7 @@ from core.events import (
     TrackMoved,
     TrackRemoved,
     TrackReparented,
+    TrackRetired,
     VerificationRequested,
     VisibleMiss,
 )
@@ -61,6 +62,7 @@ def _observations(
             extent=vec3(p.extent),
             valid_pixels=p.valid_pixels,
             parent=parent,
+            class_scores=None if not p.class_scores else dict(sorted(p.class_scores.items())),
         )
         for p, parent in zip(proposals, parents, strict=True)
     )
@@ -173,12 +175,41 @@ def _parent_evidence(
     return evidence
 
 
+def corroborates(track: Track, proposals: Sequence[Proposal], params: Params) -> bool:
+    """Does this batch's match support the track itself, not just something of its class nearby?
+
+    Yes at its place (a center inside the stored box grown by the tolerance) or by appearance
+    (both embeddings, cosine past the gate). A re-acquired track restarts as a hypothesis anyway.
+    """
+    if track.lifecycle == "removed":
+        return True
+    embedding = track.embedding()
+    grow = params.lifecycle.place_tolerance_m
+    for proposal in proposals:
+        offset = np.abs(np.asarray(proposal.center) - np.asarray(track.center))
+        if (offset <= np.asarray(track.extent) / 2 + grow).all():
+            return True
+        if (
+            embedding is not None
+            and proposal.embedding is not None
+            and embedding.shape == proposal.embedding.shape
+            and float(embedding @ proposal.embedding) > params.association.min_appearance_cosine
+        ):
+            return True
+    return False
+
+
 def observed_object(
     track: Track, proposals: Sequence[Proposal], parents: Sequence[str | None], params: Params
 ) -> list[Event]:
-    """A positive batch: `update`, then `confirm`, `move` and `reparent` as they apply."""
+    """A positive batch: `update`, then `confirm`, `move` and `reparent` as they apply.
+
+    An uncorroborated match (see `corroborates`) moves the track's center to the proposal but
+    adds no existence evidence, keeps the miss count and publishes nothing yet.
+    """
     frame_id = proposals[-1].frame_id
-    positive = positive_batch(track, params)
+    corroborated = corroborates(track, proposals, params)
+    positive = positive_batch(track, params) if corroborated else unchanged(track)
     lifecycle = positive.lifecycle
     center = vec3(proposals[-1].center)
     # Evidence about the old support is stale once the object was relocated.
@@ -199,8 +230,11 @@ def observed_object(
             batches_observed=positive.batches,
             reacquired=positive.reacquired,
             parent_evidence=evidence,
+            corroborated=None if corroborated else False,
         )
     ]
+    if not corroborated:
+        return emitted
     if should_confirm("object", lifecycle, positive.p_exist, positive.batches, params):
         lifecycle = "confirmed"
         emitted.append(
@@ -235,6 +269,30 @@ def positive_batch(track: Track, params: Params) -> PositiveBatch:
         batches=1 if reacquired else track.batches_observed + 1,
         lifecycle="tentative" if reacquired else track.lifecycle,
     )
+
+
+def unchanged(track: Track) -> PositiveBatch:
+    """No existence evidence from this batch."""
+    return PositiveBatch(
+        reacquired=False,
+        logodds=track.existence_logodds,
+        p_exist=track.p_exist,
+        batches=track.batches_observed,
+        lifecycle=track.lifecycle,
+    )
+
+
+def retired(track: Track, frame_id: str, reason: Literal["removed", "unseen"]) -> list[Event]:
+    """A hypothesis never published leaves the memory in play: removed, or unseen too long."""
+    return [
+        TrackRetired(
+            track_id=track.track_id,
+            state="retired",
+            frame_id=frame_id,
+            reason=reason,
+            last_observed=track.last_observed,
+        )
+    ]
 
 
 def _move_events(

@@ -1,6 +1,17 @@
-"""The geometric visibility gate V_i(t) of equation (3) (section 3.3)."""
+"""The geometric visibility gate V_i(t) of equation (3) (section 3.3), and when a miss counts.
+
+A track unmatched in a frame is a visible miss only when its stored box was observable there:
+at least two box samples in the valid range, inside the image, with valid depth in a 5x5 window
+and nothing closer in front (d_meas + 0.15 m >= d_expected). We add the missed-detection
+condition: the part of the box that was observable must be large enough in the image that the
+detector would have reported the object had it been there. A sliver at the image border, a
+grazing view or a far object is not evidence of absence: detectors do not report those.
+"""
 
 from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -10,6 +21,45 @@ from core.observation import Frame
 from core.params import VisibilityParams
 
 FloatArray = npt.NDArray[np.float64]
+MissEvidence = Literal["visible", "free_space"]
+
+
+@dataclass(frozen=True)
+class Sighting:
+    """How well one frame showed a stored box."""
+
+    passed: int  # samples that passed the gate
+    expected_fraction: float  # share of the image the observable part of the box covers
+    frame_id: str = ""
+
+    def better_than(self, other: Sighting) -> bool:
+        """More of the box observable."""
+        return (self.passed, self.expected_fraction) > (other.passed, other.expected_fraction)
+
+    def seen_in(self, frame_id: str) -> Sighting:
+        """The same sighting, naming its frame."""
+        return replace(self, frame_id=frame_id)
+
+
+def observable(sighting: Sighting, params: VisibilityParams, gate: bool = True) -> bool:
+    """V_i(t) = 1: at least two samples pass, and (with the gate) the observable part is
+    large enough to be detected."""
+    return sighting.passed >= params.min_samples_passed and (
+        not gate or sighting.expected_fraction >= params.min_expected_image_fraction
+    )
+
+
+def in_view_rows(
+    centers: FloatArray, extents: FloatArray, frame: Frame, params: VisibilityParams
+) -> npt.NDArray[np.intp]:
+    """Rows whose box may reach the camera's range in front of it (a cheap cull before sampling)."""
+    if centers.shape[0] == 0:
+        return np.zeros(0, dtype=np.intp)
+    depth = world_to_camera(centers, frame.pose)[:, 2]
+    reach = 0.5 * np.linalg.norm(extents, axis=1)
+    return np.flatnonzero(
+        (depth + reach >= params.min_range_m) & (depth - reach <= params.max_range_m)
+    )
 
 
 def samples_passed(
@@ -18,42 +68,59 @@ def samples_passed(
     frame: Frame,
     params: VisibilityParams,
     occlusion_test: bool = True,
-) -> npt.NDArray[np.int64]:
-    """For each stored box, how many of its samples are observable and unoccluded in `frame`.
+    miss_evidence: MissEvidence = "visible",
+) -> list[Sighting]:
+    """For each stored box: its samples that pass in `frame`, and its observable image share.
 
     A sample passes when it lies in the valid camera range, projects inside the image, has
-    valid depth in a 5x5 window, and d_meas + 0.15 m >= d_expected (no closer surface hides it).
+    valid depth in a 5x5 window, and d_meas + 0.15 m >= d_expected (no closer surface hides
+    it). With `miss_evidence="free_space"` (a DynaMem-like rule) a sample passes only when the
+    depth shows free space at it: d_meas > d_expected + 0.15 m.
     """
     count = centers.shape[0]
-    passed = np.zeros(count, dtype=np.int64)
     if count == 0:
-        return passed
+        return []
     per_track = params.box_samples_per_axis**3
     samples = world_to_camera(
         box_samples(centers, extents, params.box_samples_per_axis).reshape(-1, 3), frame.pose
     )
     expected = samples[:, 2]
     in_range = (expected >= params.min_range_m) & (expected <= params.max_range_m)
-    if not in_range.any():
-        return passed
     candidate = np.flatnonzero(in_range)
     u, v = project(samples[candidate], frame.intrinsics)
     width, height = frame.intrinsics.width, frame.intrinsics.height
     inside = (u >= 0) & (u <= width - 1) & (v >= 0) & (v <= height - 1)
     candidate, u, v = candidate[inside], u[inside], v[inside]
-    if candidate.size == 0:
-        return passed
-    if not occlusion_test:  # the ablation: in range and inside the image is enough
-        np.add.at(passed, candidate // per_track, 1)
-        return passed
-    measured = _window_depth(
-        frame.depth, np.rint(u).astype(np.intp), np.rint(v).astype(np.intp), params
-    )
-    has_depth = measured > 0
-    unoccluded = measured + params.occlusion_margin_m >= expected[candidate]
-    ok = candidate[has_depth & unoccluded]
-    np.add.at(passed, ok // per_track, 1)
-    return passed
+    ok = np.ones(candidate.size, dtype=bool)
+    if occlusion_test and candidate.size:
+        measured = _window_depth(
+            frame.depth, np.rint(u).astype(np.intp), np.rint(v).astype(np.intp), params
+        )
+        if miss_evidence == "free_space":
+            ok = (measured > 0) & (measured > expected[candidate] + params.occlusion_margin_m)
+        else:
+            ok = (measured > 0) & (measured + params.occlusion_margin_m >= expected[candidate])
+    owner = candidate // per_track
+    passed = np.bincount(owner[ok], minlength=count)
+    in_image = np.bincount(owner, minlength=count)
+    # The observable part's image area: the box's projected extent inside the image, times the
+    # share of its in-image samples that passed.
+    area = np.zeros(count)
+    if candidate.size:
+        low_u = np.full(count, np.inf)
+        high_u = np.full(count, -np.inf)
+        low_v = np.full(count, np.inf)
+        high_v = np.full(count, -np.inf)
+        np.minimum.at(low_u, owner, u)
+        np.maximum.at(high_u, owner, u)
+        np.minimum.at(low_v, owner, v)
+        np.maximum.at(high_v, owner, v)
+        seen = in_image > 0
+        area[seen] = (high_u[seen] - low_u[seen] + 1) * (high_v[seen] - low_v[seen] + 1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(in_image > 0, passed / np.maximum(in_image, 1), 0.0)
+    fraction = area * share / (width * height)
+    return [Sighting(int(p), float(f)) for p, f in zip(passed, fraction, strict=True)]
 
 
 def _window_depth(
@@ -78,8 +145,3 @@ def _window_depth(
     lower = window[rows_index, np.maximum(counts - 1, 0) // 2]
     measured: FloatArray = np.where(counts > 0, 0.5 * (upper + lower), 0.0)
     return measured
-
-
-def is_visible(samples_ok: int, params: VisibilityParams) -> bool:
-    """V_i(t) = 1 only when at least two samples pass."""
-    return samples_ok >= params.min_samples_passed

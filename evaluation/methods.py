@@ -95,7 +95,6 @@ DYNAMIC_METHODS: tuple[Method, ...] = (
             },
             "association": {"unique_class_fallback": False},
         },
-        # Assumed core rule (added on main by the core engineer): UpdateRules.miss_evidence.
         rule_flags={"identity_memory_s": FOREVER, "miss_evidence": "free_space"},
     ),
     Method(

@@ -116,7 +116,16 @@ class RealisticDetector:
                     box.id, box.label, direction, rng, PARTIAL_APPEARANCE_LOSS if cropped else 0.0
                 )
                 label = self._reported_label(box.label, rng)
-                detections.append(SimDetection(box.id, label, self.spec.score, mask, embedding))
+                detections.append(
+                    SimDetection(
+                        box.id,
+                        label,
+                        self.spec.score,
+                        mask,
+                        embedding,
+                        class_scores=self._class_scores(box.label, label, rng),
+                    )
+                )
         return detections
 
     def _reported(self, key: str, factors: ViewFactors, scale: float = 1.0) -> bool:
@@ -154,6 +163,21 @@ class RealisticDetector:
         if others and spec.flicker <= draw < spec.flicker + spec.confusion:
             return others[int(pick * len(others))]
         return label
+
+    def _class_scores(
+        self, true_label: str, reported: str, rng: np.random.Generator
+    ) -> dict[str, float] | None:
+        """An open-vocabulary detector's scores of the confusable classes (OWL-ViT and Grounding
+        DINO score every prompt): the reported class first, its group close behind. Both the
+        true class and its confusions score high, so the scores hint at, not decide, the class."""
+        group = [true_label, *self.partners.get(true_label, [])]
+        if len(group) < 2:
+            return None
+        scores = {reported: self.spec.score}
+        for other in group:
+            if other != reported:
+                scores[other] = round(self.spec.score - float(rng.uniform(0.03, 0.25)), 3)
+        return dict(sorted(scores.items(), key=lambda item: -item[1]))
 
     # -- people and phantoms ------------------------------------------------------------------
 

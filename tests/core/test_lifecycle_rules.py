@@ -99,20 +99,69 @@ def test_out_of_view_object_gets_no_negative_evidence():
 def test_small_motion_emits_move_with_same_identity():
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     moved = {"mug_1": ((0.7, 0.1, 2.0), 0.1)}
-    state, per_batch = run(state, [scene_batch("mv", moved)])
-    assert types(per_batch[0]) == ["update", "move"]
-    move = per_batch[0][1]
+    state, per_batch = run(state, [scene_batch("mv", moved), scene_batch("mv2", moved)])
+    # Without appearance the first sighting at the new place is not corroborated: the center
+    # follows it, existence waits; the second sighting there corroborates it and moves it.
+    assert types(per_batch[0]) == ["update"]
+    assert per_batch[0][0].details()["corroborated"] is False
+    assert types(per_batch[1]) == ["update", "move"]
+    move = per_batch[1][1]
     assert move.track_id == "trk-000001"
     assert move.details()["distance"] >= 0.35
     assert list(state.tracks) == ["trk-000001"]
 
 
-def test_large_motion_recovers_identity_by_unique_class_fallback():
+EMPTY: dict[str, tuple[tuple[float, float, float], float]] = {}  # the wall alone
+FAR = {"mug_1": ((-0.6, 0.1, 1.5), 0.1)}  # about 0.94 m from MUG: beyond the 0.8 m gate
+
+
+def test_large_motion_recovers_identity_once_its_place_was_seen_empty():
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
-    far = {"mug_1": ((-0.6, 0.1, 1.5), 0.1)}  # about 0.94 m away: beyond the 0.8 m gate
-    state, per_batch = run(state, [scene_batch("far", far)])
-    assert types(per_batch[0]) == ["update", "move"]
+    # Its place seen empty once, then again in the frame that shows it far away: two misses
+    # establish the absence, and the mug far away takes its identity back.
+    state, per_batch = run(
+        state, [scene_batch("gone", EMPTY), scene_batch("far", FAR), scene_batch("far2", FAR)]
+    )
+    assert types(per_batch[1]) == ["update"]  # recovered, not yet corroborated at its new place
+    assert types(per_batch[2]) == ["update", "move"]
     assert list(state.tracks) == ["trk-000001"]
+
+
+def test_the_fallback_never_takes_the_identity_of_an_object_still_in_place():
+    # mug_1 stays where it is; the robot turns away and sees a second mug elsewhere.
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    other = {"mug_2": ((0.0, 0.1, 2.0), 0.1)}
+    turned = look_pose(90.0)
+    state, per_batch = run(state, [scene_batch(f"t{i}", other, pose=turned) for i in range(2)])
+    assert types(per_batch[0])[0] == "add"
+    assert sorted(state.tracks) == ["trk-000001", "trk-000002"]
+    first = state.tracks["trk-000001"]
+    assert first.lifecycle == "confirmed" and math.dist(first.center, (0.2, 0.1, 1.93)) < 0.05
+    # One detector miss at its place is not enough either: a third mug seen elsewhere later
+    # is a new object.
+    state, per_batch = run(state, [scene_batch("miss", MUG, detect=set())])
+    assert state.tracks["trk-000001"].visible_misses == 1
+    third = {"mug_3": ((-0.9, 0.1, 2.5), 0.14)}  # 1.03 m from mug_2: no greedy match either
+    state, per_batch = run(state, [scene_batch("elsewhere", third, pose=turned)])
+    assert types(per_batch[0])[0] == "add" and len(state.tracks) == 3
+
+
+def test_appearance_picks_which_missing_mug_a_far_sighting_is():
+    rng = np.random.default_rng(11)
+    a, b = rng.normal(size=32), rng.normal(size=32)
+    mugs = {"mug_1": ((0.3, 0.1, 2.0), 0.12), "mug_2": ((-0.3, 0.1, 2.0), 0.12)}
+    embeddings = {"mug_1": a, "mug_2": b}
+    state, _ = run(
+        SceneState(), [scene_batch(f"b{i}", mugs, embeddings=embeddings) for i in range(3)]
+    )
+    state, _ = run(state, [scene_batch(f"gone{i}", EMPTY) for i in range(2)])  # both vanished
+    seen = {"mug_2": ((0.0, -0.5, 1.3), 0.12)}  # about a metre from both places
+    noisy_b = b + 0.2 * rng.normal(size=32)
+    state, per_batch = run(state, [scene_batch("far", seen, embeddings={"mug_2": noisy_b})])
+    assert sorted(state.tracks) == ["trk-000001", "trk-000002"]
+    observed = [e.track_id for e in per_batch[0] if e.details().get("evidence") == "observed"]
+    assert observed == ["trk-000002"]
+    assert len(state.tracks) == 2
 
 
 def test_fallback_refuses_when_appearance_conflicts():
@@ -121,8 +170,8 @@ def test_fallback_refuses_when_appearance_conflicts():
     state, _ = run(
         SceneState(), [scene_batch(f"b{i}", MUG, embeddings={"mug_1": a}) for i in range(3)]
     )
-    far = {"mug_1": ((-0.6, 0.1, 1.5), 0.1)}
-    state, per_batch = run(state, [scene_batch("far", far, embeddings={"mug_1": b})])
+    state, _ = run(state, [scene_batch(f"gone{i}", EMPTY) for i in range(2)])
+    state, per_batch = run(state, [scene_batch("far", FAR, embeddings={"mug_1": b})])
     assert "add" in types(per_batch[0])
     assert len(state.tracks) == 2
 

@@ -67,11 +67,10 @@ def test_every_available_method_runs_and_the_truth_starts_at_first_detection(sho
 
 
 def test_dynamem_runs_once_the_core_counts_misses_only_on_free_space(short_stream):
-    """DynaMem-inspired needs UpdateRules(miss_evidence="free_space") from the core."""
+    """DynaMem-inspired runs on the core's UpdateRules(miss_evidence="free_space")."""
     dynamem = method_named("DynaMem-inspired")
-    reason = dynamem.unavailable_reason()
-    if reason is not None:
-        pytest.skip(f"DynaMem-inspired: {reason} (the core engineer adds it on main)")
+    assert dynamem.unavailable_reason() is None
+    assert dynamem.rules.miss_evidence == "free_space"
     _run, batches = short_stream
     result = run_in_process(dynamem, batches)
     assert len(result.predictions) == batches[-1][0] + 1
