@@ -103,6 +103,10 @@ def samples_passed(
     owner = candidate // per_track
     passed = np.bincount(owner[ok], minlength=count)
     in_image = np.bincount(owner, minlength=count)
+    if miss_evidence == "free_space":
+        # Free space must be what the depth shows of the box, not a few samples at its
+        # silhouette where the window reaches the wall behind an object still there.
+        passed = np.where(2 * passed >= in_image, passed, 0)
     # The observable part's image area: the box's projected extent inside the image, times the
     # share of its in-image samples that passed.
     area = np.zeros(count)
