@@ -46,8 +46,10 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
     head_seq, next_track_number = state.head_seq, state.next_track_number
     voxels: Voxels | None = None  # copied on first use
     baselines, source_baseline = list(state.baselines), state.source_baseline
+    touched: set[str] = set()
     for event in events:
         head_seq += 1
+        touched.update(event.touched_tracks())
         match event:
             case SceneCreated():
                 params = Params.from_dict(dict(event.params))
@@ -111,7 +113,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
         voxels=state.voxels if voxels is None else voxels,
         baselines=tuple(baselines),
         source_baseline=source_baseline,
-    )
+    ).with_arrays_from(state, touched)
 
 
 def _add_voxel_evidence(voxels: Voxels, event: FixtureEvidence) -> None:

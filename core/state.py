@@ -180,8 +180,10 @@ def _vec3(values: Any) -> Vec3:
 class TrackArrays:
     """Columns of the tracks still in play (all but retired ones), in id order.
 
-    Built once per state, so that association, the visibility gate and the lifecycle rules work
-    on arrays whose length is the scene's live memory, not its history.
+    Association, the visibility gate and the lifecycle rules work on these, so that their cost
+    is the scene's live memory, not its history. `fold` derives a state's columns from the
+    previous state's by updating the rows its events touched (`evolved`), instead of rebuilding
+    them from every track.
     """
 
     track_ids: tuple[str, ...]
@@ -194,6 +196,85 @@ class TrackArrays:
     visible_misses: npt.NDArray[np.int64]  # visibility-admissible misses since last seen
     unpublished_tentative: npt.NDArray[np.bool_]  # a hypothesis never published
     last_observed: npt.NDArray[np.float64]  # tau_i (NaN when never)
+
+    @classmethod
+    def of(cls, tracks: list[Track]) -> TrackArrays:
+        """The columns of these tracks (in the order given)."""
+        rows = [_row(t) for t in tracks]
+        count = len(rows)
+        numbers = np.array([r[2] for r in rows], dtype=np.float64).reshape(count, 13)
+        return cls(
+            track_ids=tuple(r[0] for r in rows),
+            kinds=tuple(r[1] for r in rows),
+            centers=numbers[:, 0:3].copy(),
+            extents=numbers[:, 3:6].copy(),
+            published=numbers[:, 6] > 0,
+            gone=numbers[:, 7] > 0,
+            missing=numbers[:, 8] > 0,
+            visible_misses=numbers[:, 9].astype(np.int64),
+            unpublished_tentative=numbers[:, 10] > 0,
+            last_observed=numbers[:, 11].copy(),
+        )
+
+    def evolved(self, tracks: Mapping[str, Track], touched: set[str]) -> TrackArrays:
+        """The columns after the touched tracks changed (retired ones leave, new ones join)."""
+        if not touched:
+            return self
+        position = {track_id: row for row, track_id in enumerate(self.track_ids)}
+        changed = [t for t in (tracks[i] for i in touched) if t.lifecycle != "retired"]
+        if len(changed) == len(touched) and all(t.track_id in position for t in changed):
+            fresh = TrackArrays.of(changed)  # only rows updated in place: the common batch
+            rows = np.array([position[t.track_id] for t in changed], dtype=np.intp)
+            columns = {}
+            for name in _NUMERIC_COLUMNS:
+                column = getattr(self, name).copy()
+                column[rows] = getattr(fresh, name)
+                columns[name] = column
+            return TrackArrays(self.track_ids, self.kinds, **columns)
+        keep = [i for i in self.track_ids if i not in touched]
+        kept = np.array([position[i] for i in keep], dtype=np.intp)
+        fresh = TrackArrays.of(changed)
+        order = sorted(range(len(keep) + len(changed)), key=([*keep, *fresh.track_ids]).__getitem__)
+        columns = {
+            name: np.concatenate((getattr(self, name)[kept], getattr(fresh, name)))[order]
+            for name in _NUMERIC_COLUMNS
+        }
+        ids = [*keep, *fresh.track_ids]
+        kinds = [*(self.kinds[position[i]] for i in keep), *fresh.kinds]
+        return TrackArrays(
+            tuple(ids[i] for i in order), tuple(kinds[i] for i in order), **columns
+        )
+
+
+_NUMERIC_COLUMNS = (
+    "centers",
+    "extents",
+    "published",
+    "gone",
+    "missing",
+    "visible_misses",
+    "unpublished_tentative",
+    "last_observed",
+)
+
+
+def _row(t: Track) -> tuple[str, str, tuple[float, ...]]:
+    published = t.published_center is not None
+    return (
+        t.track_id,
+        t.kind,
+        (
+            *t.center,
+            *t.extent,
+            published,
+            t.lifecycle == "removed" or t.verification == "rejected",
+            t.lifecycle in ("removed", "demoted"),
+            t.visible_misses,
+            t.lifecycle == "tentative" and not published,
+            np.nan if t.last_observed is None else t.last_observed,
+            0.0,
+        ),
+    )
 
 
 @dataclass(frozen=True)
@@ -241,32 +322,16 @@ class SceneState:
     @cached_property
     def arrays(self) -> TrackArrays:
         """Columns of every track but retired ones, in id order."""
-        live = [self.tracks[i] for i in sorted(self.tracks)]
-        live = [t for t in live if t.lifecycle != "retired"]
-        count = len(live)
-        centers = np.array([t.center for t in live], dtype=np.float64).reshape(count, 3)
-        extents = np.array([t.extent for t in live], dtype=np.float64).reshape(count, 3)
-        return TrackArrays(
-            track_ids=tuple(t.track_id for t in live),
-            kinds=tuple(t.kind for t in live),
-            centers=centers,
-            extents=extents,
-            published=np.array([t.published_center is not None for t in live], dtype=np.bool_),
-            gone=np.array(
-                [t.lifecycle == "removed" or t.verification == "rejected" for t in live],
-                dtype=np.bool_,
-            ),
-            missing=np.array([t.lifecycle in ("removed", "demoted") for t in live], dtype=np.bool_),
-            visible_misses=np.array([t.visible_misses for t in live], dtype=np.int64),
-            unpublished_tentative=np.array(
-                [t.lifecycle == "tentative" and t.published_center is None for t in live],
-                dtype=np.bool_,
-            ),
-            last_observed=np.array(
-                [np.nan if t.last_observed is None else t.last_observed for t in live],
-                dtype=np.float64,
-            ),
+        return TrackArrays.of(
+            [t for t in (self.tracks[i] for i in sorted(self.tracks)) if t.lifecycle != "retired"]
         )
+
+    def with_arrays_from(self, previous: SceneState, touched: set[str]) -> SceneState:
+        """This state, its columns derived from `previous`'s when those were built."""
+        columns = previous.__dict__.get("arrays")
+        if columns is not None:
+            self.__dict__["arrays"] = columns.evolved(self.tracks, touched)
+        return self
 
     def to_dict(self) -> dict[str, Any]:
         """Canonical JSON-able form: snapshots store it, tests compare it."""
