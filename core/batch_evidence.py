@@ -149,13 +149,13 @@ class BatchEvidence:
         """Keep, per live track that could be in view, its best view of this batch."""
         self.last_frame, self.last_timestamp = frame.frame_id, frame.timestamp
         arrays = self.state.arrays
-        rows = in_view_rows(arrays.centers, arrays.extents, frame, self.params.visibility)
+        rows = in_view_rows(arrays.box_centers, arrays.box_extents, frame, self.params.visibility)
         rows = rows[self._live_rows[rows]]
         if rows.size == 0:
             return
         sightings = samples_passed(
-            arrays.centers[rows],
-            arrays.extents[rows],
+            arrays.box_centers[rows],
+            arrays.box_extents[rows],
             frame,
             self.params.visibility,
             self.rules.visibility_gate,

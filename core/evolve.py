@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import operator
 from collections.abc import Iterable
+from typing import Any
 
 from core.belief import class_distribution
 from core.events import (
@@ -29,7 +30,7 @@ from core.events import (
     VisibleMiss,
 )
 from core.params import Params
-from core.state import BaselineRecord, SceneState, Track, VoxelKey
+from core.state import BaselineRecord, SceneState, Track, Vec3, VoxelKey
 
 Voxels = dict[VoxelKey, tuple[int, tuple[float, ...]]]
 
@@ -89,7 +90,11 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                     lifecycle="confirmed", published_center=published
                 )
             case TrackMoved():
-                tracks[event.track_id] = tracks[event.track_id].evolved(published_center=event.to)
+                track = tracks[event.track_id]
+                # Moved: what it covered before is no longer where it is.
+                tracks[event.track_id] = track.evolved(
+                    published_center=event.to, box=_box([(track.center, track.extent)])
+                )
             case TrackReparented():
                 tracks[event.track_id] = tracks[event.track_id].evolved(parent=event.new_parent)
             case TrackDemoted() | TrackRemoved() | TrackRetired():
@@ -182,7 +187,7 @@ def _observe(
         # Fixtures: the EMA center, the best frame to crop, the class margin (summed since the
         # track was last acquired: a re-acquired fixture earns its consensus anew); no parents.
         restart = isinstance(event, FixtureAdded) or event.reacquired
-        fixture_fields = {
+        fixture_fields: dict[str, Any] = {
             "center": event.center,
             "best_frame": event.best_frame,
             "best_frame_support": event.best_frame_support,
@@ -191,6 +196,7 @@ def _observe(
         }
     else:
         fixture_fields = {"center": last.center, "parent_evidence": dict(event.parent_evidence)}
+        fixture_fields["box"] = _observed_box(track, event, params)
         if isinstance(event, ObjectObserved) and event.corroborated is False:
             misses = track.visible_misses  # an uncorroborated match leaves the misses standing
     return track.evolved(
@@ -207,3 +213,35 @@ def _observe(
         batches_observed=event.batches_observed,
         visible_misses=misses,
     )
+
+
+def _box(boxes: list[tuple[Vec3, Vec3]]) -> tuple[float, ...]:
+    """The union of (center, extent) boxes as (low x, y, z, high x, y, z)."""
+    low = [min(c[i] - e[i] / 2 for c, e in boxes) for i in range(3)]
+    high = [max(c[i] + e[i] / 2 for c, e in boxes) for i in range(3)]
+    return (*low, *high)
+
+
+def _observed_box(
+    track: Track, event: ObjectAdded | ObjectObserved, params: Params
+) -> tuple[float, ...]:
+    """The visibility box after a positive batch: grown by it while the object stays put."""
+    seen = _box([(o.center, o.extent) for o in event.observations])
+    fresh = (
+        isinstance(event, ObjectAdded)
+        or event.reacquired
+        or event.corroborated is False
+        or track.box is None
+    )
+    if fresh or track.box is None:
+        return seen
+    union = _box([_as_center_extent(track.box), _as_center_extent(seen)])
+    if max(union[i + 3] - union[i] for i in range(3)) > params.fusion.max_box_m:
+        return seen  # drifted or carried: the latest view is the object
+    return union
+
+
+def _as_center_extent(box: tuple[float, ...]) -> tuple[Vec3, Vec3]:
+    center = ((box[0] + box[3]) / 2, (box[1] + box[4]) / 2, (box[2] + box[5]) / 2)
+    extent = (box[3] - box[0], box[4] - box[1], box[5] - box[2])
+    return center, extent

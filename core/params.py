@@ -140,6 +140,9 @@ class VisibilityParams:
     # pixels small and detects them worst). A sliver at the border, a grazing or a far view
     # passes two samples of the gate but would not have been detected: it is not a miss.
     min_expected_image_fraction: Fraction = 0.0005
+    # And at least this share of the box's projection must lie inside the image: detectors
+    # rarely report an object cut down to a strip by the image border.
+    min_in_image_share: Fraction = 0.5
 
     def __post_init__(self) -> None:
         if self.min_range_m >= self.max_range_m:
@@ -159,6 +162,10 @@ class FusionParams:
     verification_evidence_weight: Annotated[float, Field(gt=0.0, le=100.0)] = 3.0  # cached VLM
     max_recent_centers: Annotated[int, Field(ge=2, le=1024)] = 32  # Sigma_i over the last 32
     fixture_center_alpha: Annotated[float, Field(gt=0.0, le=1.0)] = 0.35  # EMA of fixture centers
+    # Not in the paper: the visibility gate samples the union of an object's observed boxes
+    # (partial views give partial boxes); past this size on an axis the union is dropped for
+    # the latest box, as no object we track is larger and drift must not inflate it.
+    max_box_m: Annotated[float, Field(gt=0.0, le=10.0)] = 1.0
 
 
 @dataclass(frozen=True)

@@ -6,10 +6,11 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from functools import cached_property
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
+from pydantic import Field
 
 from core.params import Params
 from core.voxels import pack
@@ -23,6 +24,10 @@ VerificationStatus = Literal["pending", "confirmed", "rejected"]
 InspectionStatus = Literal["completed", "abandoned"]
 SNAPSHOT_FORMAT_VERSION = 3
 VoxelKey = tuple[int, int, int]
+
+
+def _none(value: object) -> bool:
+    return value is None
 
 
 def logistic(logodds: float) -> float:
@@ -59,6 +64,10 @@ class Track:
     best_frame_support: int = 0
     inspection_status: InspectionStatus | None = None  # fixtures: close-range inspection
     inspection_attempts: int = 0  # failed captures so far
+    # Objects: the box the visibility gate samples, (low x, y, z, high x, y, z): the union of
+    # the boxes observed since the object last moved. One observation's box is too small when
+    # its mask was cut by the image border or by something in front; the union is the object.
+    box: Annotated[tuple[float, ...] | None, Field(exclude_if=_none)] = None
 
     def evolved(self, **changes: Any) -> Track:
         """A copy with `changes` (what dataclasses.replace does, without its per-field cost).
@@ -140,6 +149,7 @@ class Track:
             "best_frame_support": self.best_frame_support,
             "inspection_status": self.inspection_status,
             "inspection_attempts": self.inspection_attempts,
+            "box": None if self.box is None else list(self.box),
         }
 
     @classmethod
@@ -160,6 +170,7 @@ class Track:
             parent_evidence=dict(record["parent_evidence"]),
             embedding_sum=None if embedding_sum is None else tuple(embedding_sum),
             published_center=None if published is None else tuple(published),
+            box=None if record["box"] is None else tuple(record["box"]),
         )
         if values.keys() != _TRACK_FIELDS:
             raise ValueError(f"track record fields differ: {sorted(values.keys() ^ _TRACK_FIELDS)}")
@@ -188,8 +199,10 @@ class TrackArrays:
 
     track_ids: tuple[str, ...]
     kinds: tuple[str, ...]
-    centers: npt.NDArray[np.float64]  # (n, 3)
+    centers: npt.NDArray[np.float64]  # (n, 3): the latest center (association)
     extents: npt.NDArray[np.float64]  # (n, 3)
+    box_centers: npt.NDArray[np.float64]  # (n, 3): the box the visibility gate samples
+    box_extents: npt.NDArray[np.float64]  # (n, 3)
     published: npt.NDArray[np.bool_]  # ever published (it has a published center)
     gone: npt.NDArray[np.bool_]  # removed, or retired from dispute by a rejection
     missing: npt.NDArray[np.bool_]  # removed or demoted: its absence is established
@@ -202,12 +215,14 @@ class TrackArrays:
         """The columns of these tracks (in the order given)."""
         rows = [_row(t) for t in tracks]
         count = len(rows)
-        numbers = np.array([r[2] for r in rows], dtype=np.float64).reshape(count, 13)
+        numbers = np.array([r[2] for r in rows], dtype=np.float64).reshape(count, 18)
         return cls(
             track_ids=tuple(r[0] for r in rows),
             kinds=tuple(r[1] for r in rows),
             centers=numbers[:, 0:3].copy(),
             extents=numbers[:, 3:6].copy(),
+            box_centers=numbers[:, 12:15].copy(),
+            box_extents=numbers[:, 15:18].copy(),
             published=numbers[:, 6] > 0,
             gone=numbers[:, 7] > 0,
             missing=numbers[:, 8] > 0,
@@ -241,14 +256,14 @@ class TrackArrays:
         }
         ids = [*keep, *fresh.track_ids]
         kinds = [*(self.kinds[position[i]] for i in keep), *fresh.kinds]
-        return TrackArrays(
-            tuple(ids[i] for i in order), tuple(kinds[i] for i in order), **columns
-        )
+        return TrackArrays(tuple(ids[i] for i in order), tuple(kinds[i] for i in order), **columns)
 
 
 _NUMERIC_COLUMNS = (
     "centers",
     "extents",
+    "box_centers",
+    "box_extents",
     "published",
     "gone",
     "missing",
@@ -260,6 +275,11 @@ _NUMERIC_COLUMNS = (
 
 def _row(t: Track) -> tuple[str, str, tuple[float, ...]]:
     published = t.published_center is not None
+    box_center: tuple[float, ...] = t.center
+    box_extent: tuple[float, ...] = t.extent
+    if t.box is not None:
+        box_center = tuple((t.box[i] + t.box[i + 3]) / 2 for i in range(3))
+        box_extent = tuple(t.box[i + 3] - t.box[i] for i in range(3))
     return (
         t.track_id,
         t.kind,
@@ -272,7 +292,8 @@ def _row(t: Track) -> tuple[str, str, tuple[float, ...]]:
             t.visible_misses,
             t.lifecycle == "tentative" and not published,
             np.nan if t.last_observed is None else t.last_observed,
-            0.0,
+            *box_center,
+            *box_extent,
         ),
     )
 

@@ -30,6 +30,7 @@ class Sighting:
 
     passed: int  # samples that passed the gate
     expected_fraction: float  # share of the image the observable part of the box covers
+    in_image_share: float = 1.0  # share of the box's projected extent inside the image
     frame_id: str = ""
 
     def better_than(self, other: Sighting) -> bool:
@@ -45,7 +46,11 @@ def observable(sighting: Sighting, params: VisibilityParams, gate: bool = True) 
     """V_i(t) = 1: at least two samples pass, and (with the gate) the observable part is
     large enough to be detected."""
     return sighting.passed >= params.min_samples_passed and (
-        not gate or sighting.expected_fraction >= params.min_expected_image_fraction
+        not gate
+        or (
+            sighting.expected_fraction >= params.min_expected_image_fraction
+            and sighting.in_image_share >= params.min_in_image_share
+        )
     )
 
 
@@ -89,6 +94,7 @@ def samples_passed(
     candidate = np.flatnonzero(in_range)
     u, v = project(samples[candidate], frame.intrinsics)
     width, height = frame.intrinsics.width, frame.intrinsics.height
+    full_area = _bbox_area(candidate // per_track, u, v, count)  # the box's projection, unclipped
     inside = (u >= 0) & (u <= width - 1) & (v >= 0) & (v <= height - 1)
     candidate, u, v = candidate[inside], u[inside], v[inside]
     ok = np.ones(candidate.size, dtype=bool)
@@ -108,23 +114,32 @@ def samples_passed(
         # silhouette where the window reaches the wall behind an object still there.
         passed = np.where(2 * passed >= in_image, passed, 0)
     # The observable part's image area: the box's projected extent inside the image, times the
-    # share of its in-image samples that passed.
-    area = np.zeros(count)
-    if candidate.size:
-        low_u = np.full(count, np.inf)
-        high_u = np.full(count, -np.inf)
-        low_v = np.full(count, np.inf)
-        high_v = np.full(count, -np.inf)
-        np.minimum.at(low_u, owner, u)
-        np.maximum.at(high_u, owner, u)
-        np.minimum.at(low_v, owner, v)
-        np.maximum.at(high_v, owner, v)
-        seen = in_image > 0
-        area[seen] = (high_u[seen] - low_u[seen] + 1) * (high_v[seen] - low_v[seen] + 1)
+    # share of its in-image samples that passed; and how much of its projection is in the image.
+    area = _bbox_area(owner, u, v, count)
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.where(in_image > 0, passed / np.maximum(in_image, 1), 0.0)
+        in_image_share = np.where(full_area > 0, area / np.maximum(full_area, 1e-9), 0.0)
     fraction = area * share / (width * height)
-    return [Sighting(int(p), float(f)) for p, f in zip(passed, fraction, strict=True)]
+    return [
+        Sighting(int(p), float(f), float(i))
+        for p, f, i in zip(passed, fraction, in_image_share, strict=True)
+    ]
+
+
+def _bbox_area(owner: npt.NDArray[np.intp], u: FloatArray, v: FloatArray, count: int) -> FloatArray:
+    """Per box, the area in pixels of the bounding box of its projected samples (0 when none)."""
+    area = np.zeros(count)
+    if owner.size == 0:
+        return area
+    low_u, high_u = np.full(count, np.inf), np.full(count, -np.inf)
+    low_v, high_v = np.full(count, np.inf), np.full(count, -np.inf)
+    np.minimum.at(low_u, owner, u)
+    np.maximum.at(high_u, owner, u)
+    np.minimum.at(low_v, owner, v)
+    np.maximum.at(high_v, owner, v)
+    seen = np.isfinite(low_u)
+    area[seen] = (high_u[seen] - low_u[seen] + 1) * (high_v[seen] - low_v[seen] + 1)
+    return area
 
 
 def _window_depth(

@@ -93,3 +93,15 @@ def container(
         yield built
     finally:
         engine.dispose()
+
+
+SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+
+
+@pytest.fixture(scope="session")
+def real_kitchen() -> Path:
+    """The real 7-Scenes kitchen sequence, read where it lies (never copied into the repo)."""
+    path = SHARED_DATA / "7scenes-kitchen"
+    if not (path / "frame-000000.depth.png").is_file():
+        pytest.skip(f"needs the real sequence in ../shared/data ({path} is absent in this clone)")
+    return path

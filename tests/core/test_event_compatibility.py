@@ -34,18 +34,21 @@ def decoded(row: dict[str, Any]) -> Event:
 
 
 def without_new_params(state: dict[str, Any], golden: dict[str, Any]) -> dict[str, Any]:
-    """The state with only the parameter keys the golden state knew (later versions add some),
-    and the snapshot format version set aside (it names a cache's layout, not the state)."""
+    """The state with only the parameter and track keys the golden state knew (later versions
+    add some), and the snapshot format version set aside (it names a cache's layout)."""
 
     def prune(value: Any, like: Any) -> Any:
         if isinstance(value, dict) and isinstance(like, dict):
             return {key: prune(value[key], like[key]) for key in like if key in value}
         return value
 
+    fields = set(golden["tracks"][0]) if golden["tracks"] else set()
     return {
         **state,
         "params": prune(state["params"], golden["params"]),
         "format_version": golden["format_version"],
+        # Fields later versions derive from the same events (the visibility box) set aside.
+        "tracks": [{k: v for k, v in t.items() if k in fields} for t in state["tracks"]],
     }
 
 

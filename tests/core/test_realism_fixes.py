@@ -87,7 +87,10 @@ def test_a_sliver_at_the_image_border_is_not_a_miss() -> None:
             break
     assert sliver is not None
     assert [e for e in decide(state, sliver) if e.details().get("evidence") == "visible_miss"] == []
-    anything = replace(state.params, visibility=replace(params, min_expected_image_fraction=0.0))
+    anything = replace(
+        state.params,
+        visibility=replace(params, min_expected_image_fraction=0.0, min_in_image_share=0.0),
+    )
     events = decide(state, sliver, anything)
     assert [e.details().get("evidence") for e in events] == ["visible_miss"]
 
