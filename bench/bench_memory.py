@@ -79,7 +79,8 @@ def noise_frames() -> list[dict[str, Any]]:
     half = np.zeros((HEIGHT, WIDTH), dtype=bool)
     half[:, : WIDTH // 2] = True
     detections = [{"label": "mug", "score": 0.9, "mask": rle(half)} for _ in range(4)]
-    frames, size = [], 0
+    frames: list[dict[str, Any]] = []
+    size = 0
     while len(frames) < DEFAULTS.max_frames_per_batch:
         depth = rng.integers(300, 6000, size=(HEIGHT, WIDTH))
         candidate = frame(len(frames), WIDTH, HEIGHT, depth, detections)
@@ -170,7 +171,7 @@ def peak_mb(process: subprocess.Popen[bytes]) -> float:
 
 def run_case(name: str, make: Callable[[], list[dict[str, Any]]], root: Path) -> dict[str, Any]:
     """Serve, post the batch, stop the API; drain with a worker; peak memory of both."""
-    body = {"batch_id": "largest", "frames": make()}
+    body: dict[str, Any] = {"batch_id": "largest", "frames": make()}
     content = httpx.Request("POST", "http://x", json=body).content
     data = root / name.replace(" ", "-")
     env = {

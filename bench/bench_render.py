@@ -7,6 +7,7 @@ import os
 import platform
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -55,7 +56,7 @@ def measure_fps(n_frames: int, nthreads: int) -> dict[str, float]:
 
 def main() -> None:
     """Run single-thread and all-thread measurements, print them and save JSON."""
-    results = {
+    results: dict[str, Any] = {
         "resolution": [CameraModel().width, CameraModel().height],
         "cpu_count": os.cpu_count(),
         "machine": platform.machine(),

@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import httpx
 
@@ -23,6 +23,9 @@ from core.state import SceneState, Track
 from evaluation.methods import Method
 from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
 from service.codec import decode_batch
+
+if TYPE_CHECKING:  # tests drive the service in process through Starlette's client (on httpx2)
+    from fastapi.testclient import TestClient
 
 WireBatch = tuple[
     int, dict[str, Any]
@@ -156,7 +159,7 @@ def run_in_process(
 def run_via_service(
     method: Method,
     batches: Sequence[WireBatch],
-    client: httpx.Client,
+    client: httpx.Client | TestClient,
     on_batch: Callable[[], None] | None = None,
     timeout_s: float = 120.0,
 ) -> MethodRun:
@@ -198,7 +201,7 @@ def run_via_service(
 
 
 def _wait_done(
-    client: httpx.Client, scene_id: str, batch_id: str, timeout_s: float
+    client: httpx.Client | TestClient, scene_id: str, batch_id: str, timeout_s: float
 ) -> dict[str, Any]:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:

@@ -40,7 +40,8 @@ def rotation_onto(source: np.ndarray, target: np.ndarray) -> np.ndarray:
         perpendicular /= np.linalg.norm(perpendicular)
         return 2.0 * np.outer(perpendicular, perpendicular) - np.eye(3)
     skew = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    return np.eye(3) + skew + skew @ skew * ((1.0 - cosine) / sine**2)
+    rotation: np.ndarray = np.eye(3) + skew + skew @ skew * ((1.0 - cosine) / sine**2)
+    return rotation
 
 
 def back_project(
@@ -53,7 +54,8 @@ def back_project(
     x = (cols[valid] - camera.cx) / camera.fx * z[valid]
     y = (rows[valid] - camera.cy) / camera.fy * z[valid]
     points = np.column_stack([x, y, z[valid]])
-    return points @ pose[:3, :3].T + pose[:3, 3]
+    world_points: np.ndarray = points @ pose[:3, :3].T + pose[:3, 3]
+    return world_points
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,7 +8,7 @@ import numpy as np
 import open3d as o3d
 
 from sim.camera import CameraModel
-from sim.world import World, build_scene
+from sim.world import CPU, World, build_scene
 
 INVALID_GEOMETRY = o3d.t.geometry.RaycastingScene.INVALID_ID
 
@@ -36,8 +36,8 @@ def _pinhole_rays(camera: CameraModel, pose: np.ndarray) -> o3d.core.Tensor:
     intrinsic[1, 2] += 0.5
     world_to_camera = np.linalg.inv(pose)
     return o3d.t.geometry.RaycastingScene.create_rays_pinhole(
-        o3d.core.Tensor(intrinsic),
-        o3d.core.Tensor(world_to_camera),
+        o3d.core.Tensor(intrinsic, o3d.core.float64, CPU),
+        o3d.core.Tensor(world_to_camera, o3d.core.float64, CPU),
         camera.width,
         camera.height,
     )

@@ -142,6 +142,7 @@ def _shortened(raw: dict[str, Any], frames: int) -> dict[str, Any]:
     """The scenario squeezed into `frames` frames, events keeping their relative times."""
     shortened = copy.deepcopy(raw)
     background = shortened.get("background")
+    original: int | None  # the frame count before shortening
     if isinstance(background, dict):
         # A recording is shortened by keeping its first `frames` selected frames.
         try:
@@ -192,7 +193,7 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
     listed = tuple(
         top.get("objects", lambda value, where: sequence(value, where, parse_object), [])
     )
-    trajectory = top.get("trajectory", parse_trajectory, None)
+    trajectory: TrajectorySpec | None = top.get("trajectory", parse_trajectory, None)
     events_and_new = top.get("events", lambda value, where: sequence(value, where, parse_event), [])
     detector = top.get("detector", parse_detector, None) or parse_detector({}, "detector")
     people = tuple(top.get("people", lambda value, where: sequence(value, where, parse_person), []))
@@ -225,7 +226,7 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
     objects = listed + event_only
     check_layout(room_size, walls, fixtures, occluders, objects, len(listed))
     check_events(file_order, objects, fixtures, frames)
-    taken = {spec.id for spec in (*fixtures, *occluders, *objects)}
+    taken = {spec.id for specs in (fixtures, occluders, objects) for spec in specs}
     check_people(people, room_size, frames, taken)
     check_phantoms(detector.phantoms, room_size)
     fixture_ids = {spec.id for spec in fixtures}
@@ -294,6 +295,8 @@ def check_phantoms(phantoms: tuple[PhantomSpec, ...], room_size: Vec3 | None) ->
 def _room(value: Any, where: str) -> tuple[float, float, float]:
     """The room's x and y extents and height."""
     section = Section(value, where)
-    size = section.get("size", lambda item, at: vector(item, at, 3, positive_only=True))
+    size: tuple[float, float, float] = section.get(
+        "size", lambda item, at: vector(item, at, 3, positive_only=True)
+    )
     section.finish()
     return size

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from sim.scenario_fields import ScenarioError
-from sim.scenario_parts import EventSpec, FixtureSpec, ObjectSpec, OccluderSpec, WallSpec
+from sim.scenario_parts import EventSpec, FixtureSpec, ObjectSpec, OccluderSpec, Vec2, WallSpec
 from sim.scenario_spec import Scenario
 from sim.trajectory import path_samples, trajectory_poses
 from sim.world import Box
@@ -21,7 +21,9 @@ def _inside_footprint(point: np.ndarray, box: Box, margin: float) -> bool:
     dx, dy = point[0] - box.center[0], point[1] - box.center[1]
     cos_yaw, sin_yaw = math.cos(box.yaw), math.sin(box.yaw)
     local_x, local_y = cos_yaw * dx + sin_yaw * dy, -sin_yaw * dx + cos_yaw * dy
-    return abs(local_x) <= box.size[0] / 2 + margin and abs(local_y) <= box.size[1] / 2 + margin
+    return bool(
+        abs(local_x) <= box.size[0] / 2 + margin and abs(local_y) <= box.size[1] / 2 + margin
+    )
 
 
 def _half_extents_on(obj_size: tuple[float, ...], relative_yaw: float) -> tuple[float, float]:
@@ -59,7 +61,7 @@ def check_layout(
     """Unique ids, fixtures inside the room, objects on known supports and on their tops."""
     seen: dict[str, str] = {}
     for section, specs in (("fixtures", fixtures), ("occluders", occluders), ("objects", objects)):
-        for index, spec in enumerate(specs):
+        for index, spec in enumerate[FixtureSpec | OccluderSpec | ObjectSpec](specs):
             if spec.id in seen:
                 raise ScenarioError(
                     f"{section}[{index}].id: {spec.id!r} is also used by {seen[spec.id]}"
@@ -67,7 +69,7 @@ def check_layout(
             seen[spec.id] = f"{section}[{index}]"
     if room_size is not None:
         for section, specs in (("fixtures", fixtures), ("occluders", occluders)):
-            for index, spec in enumerate(specs):
+            for index, spec in enumerate[FixtureSpec | OccluderSpec](specs):
                 corners = _footprint_corners(spec.box())
                 if corners.min() < -1e-9 or (corners > np.array(room_size[:2]) + 1e-9).any():
                     raise ScenarioError(f"{section}[{index}].center: {spec.id!r} leaves the room")
@@ -89,7 +91,8 @@ def _footprint_corners(box: Box) -> np.ndarray:
     signs = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)
     local = signs * np.array(box.size[:2]) / 2
     rotation = np.array([[cos_yaw, -sin_yaw], [sin_yaw, cos_yaw]])
-    return local @ rotation.T + np.array(box.center[:2])
+    corners: np.ndarray = local @ rotation.T + np.array(box.center[:2])
+    return corners
 
 
 def check_events(
@@ -101,7 +104,9 @@ def check_events(
     """Replay the events in frame order and fail on any that does not fit the state then."""
     by_fixture = {spec.id: spec for spec in fixtures}
     by_object = {spec.id: spec for spec in objects}
-    state = {spec.id: [not spec.absent, spec.on, spec.at, spec.yaw] for spec in objects}
+    state: dict[str, tuple[bool, str, Vec2, float]] = {
+        spec.id: (not spec.absent, spec.on, spec.at, spec.yaw) for spec in objects
+    }
     appears = {event.object for event in events if event.type == "appear"}
     for index, spec in enumerate(objects):
         if spec.absent and spec.id not in appears:
@@ -135,7 +140,7 @@ def check_events(
         if event.type != "disappear":
             size = by_object[event.object].size
             check_fits(f"{where}.at", event.object, size, new_yaw, new_at, by_fixture[new_support])
-        state[event.object] = [event.type != "disappear", new_support, new_at, new_yaw]
+        state[event.object] = (event.type != "disappear", new_support, new_at, new_yaw)
 
 
 def check_trajectory(scenario: Scenario) -> None:

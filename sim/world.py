@@ -25,6 +25,10 @@ BOX_TRIANGLES = np.array(
     dtype=np.uint32,
 )  # fmt: skip
 
+# Open3D tensors live here. Its stubs make Tensor's dtype and device required, so callers spell
+# out what Open3D would pick by itself: the array's own dtype, on this device.
+CPU = o3d.core.Device("CPU:0")
+
 
 @dataclass(frozen=True)
 class Box:
@@ -146,8 +150,8 @@ class SceneGeometry:
 
 def _add_box(scene: o3d.t.geometry.RaycastingScene, corners: np.ndarray) -> int:
     """Add one box's triangles to the scene and return its geometry id."""
-    vertices = o3d.core.Tensor(corners.astype(np.float32))
-    triangles = o3d.core.Tensor(BOX_TRIANGLES)
+    vertices = o3d.core.Tensor(corners.astype(np.float32), o3d.core.float32, CPU)
+    triangles = o3d.core.Tensor(BOX_TRIANGLES, o3d.core.uint32, CPU)
     return int(scene.add_triangles(vertices, triangles))
 
 

@@ -10,14 +10,14 @@ import yaml
 DOCKER = Path(__file__).resolve().parents[1] / "docker"
 
 
-def test_the_image_runs_as_an_unprivileged_user():
+def test_the_image_runs_as_an_unprivileged_user() -> None:
     dockerfile = (DOCKER / "Dockerfile").read_text()
     users = re.findall(r"^USER\s+(\S+)", dockerfile, flags=re.MULTILINE)
     assert users and users[-1].split(":")[0] not in ("root", "0")
     assert dockerfile.index("USER") > dockerfile.index("pip install")  # installed as root
 
 
-def test_compose_publishes_on_loopback_and_hard_codes_no_password():
+def test_compose_publishes_on_loopback_and_hard_codes_no_password() -> None:
     text = (DOCKER / "compose.yaml").read_text()
     compose = yaml.safe_load(text)
     assert compose["services"]["api"]["ports"] == ["${PBDAG_PUBLISH:-127.0.0.1}:8000:8000"]

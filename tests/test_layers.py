@@ -48,7 +48,7 @@ def imported_roots(path: Path) -> set[str]:
 
 
 @pytest.mark.parametrize("package", sorted(FORBIDDEN))
-def test_package_imports_respect_the_layers(package):
+def test_package_imports_respect_the_layers(package: str) -> None:
     modules = sorted((ROOT / package).rglob("*.py"))
     assert modules, f"{package}/ has no modules"
     violations = {
@@ -58,7 +58,7 @@ def test_package_imports_respect_the_layers(package):
     assert {name: bad for name, bad in violations.items() if bad} == {}
 
 
-def test_the_checker_sees_a_violation(tmp_path):
+def test_the_checker_sees_a_violation(tmp_path: Path) -> None:
     module = tmp_path / "bad.py"
     module.write_text("import sqlalchemy\nfrom service.app import create_app\n")
     assert imported_roots(module) >= {"sqlalchemy", "service"}
@@ -109,7 +109,7 @@ def import_graph(root: Path, packages: tuple[str, ...]) -> nx.DiGraph:
     return graph
 
 
-def test_sim_and_evaluation_modules_import_each_other_without_a_cycle():
+def test_sim_and_evaluation_modules_import_each_other_without_a_cycle() -> None:
     graph = import_graph(ROOT, ACYCLIC)
     assert graph.number_of_edges() > 0, "the checker found no imports at all"
     try:
@@ -119,7 +119,7 @@ def test_sim_and_evaluation_modules_import_each_other_without_a_cycle():
     pytest.fail("import cycle: " + " -> ".join(edge[0] for edge in cycle) + f" -> {cycle[-1][1]}")
 
 
-def test_the_cycle_checker_sees_a_cycle_hidden_under_type_checking(tmp_path):
+def test_the_cycle_checker_sees_a_cycle_hidden_under_type_checking(tmp_path: Path) -> None:
     package = tmp_path / "pkg"
     package.mkdir()
     (package / "__init__.py").write_text("")

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
+
 import numpy as np
 
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
+from core.state import Vec3
 from sim.camera import CameraModel, look_at
 from sim.render import render
 from sim.world import Box, World, object_on
@@ -33,7 +36,14 @@ COUNTER_VIEWS = [
 ]
 
 
-def frame(world: World, eye, target, frame_id: str, scores=SCORES, objects: bool = True) -> Frame:
+def frame(
+    world: World,
+    eye: Vec3,
+    target: Vec3,
+    frame_id: str,
+    scores: Mapping[str, Mapping[str, float]] = SCORES,
+    objects: bool = True,
+) -> Frame:
     """A rendered frame with fixture masks (class scores) and object masks."""
     pose = look_at(eye, target)
     view = render(world, CAMERA, pose)
@@ -42,7 +52,7 @@ def frame(world: World, eye, target, frame_id: str, scores=SCORES, objects: bool
         mask = view.fixture_instance == index
         if mask.sum() >= 200:
             fixture_scores = scores[fixture.id]
-            top = max(fixture_scores, key=fixture_scores.get)
+            top = max(fixture_scores, key=fixture_scores.__getitem__)
             detections.append(
                 Detection(
                     top, fixture_scores[top], "fixture", Mask.from_array(mask), None, fixture_scores
@@ -56,7 +66,13 @@ def frame(world: World, eye, target, frame_id: str, scores=SCORES, objects: bool
     return Frame(frame_id, 0.0, INTRINSICS, pose, view.depth.astype(np.float32), tuple(detections))
 
 
-def batches(world: World, views, prefix: str, scores=SCORES, objects: bool = True) -> list[Batch]:
+def batches(
+    world: World,
+    views: Iterable[tuple[Vec3, Vec3]],
+    prefix: str,
+    scores: Mapping[str, Mapping[str, float]] = SCORES,
+    objects: bool = True,
+) -> list[Batch]:
     """One single-frame batch per viewpoint."""
     return [
         Batch(f"{prefix}{i}", (frame(world, eye, target, f"{prefix}{i}", scores, objects),))

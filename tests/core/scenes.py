@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from core.masks import Mask
@@ -47,7 +49,11 @@ def detection(label: str, mask: np.ndarray, embedding: np.ndarray | None = None)
 
 
 def frame(
-    frame_id: str, depth: np.ndarray, detections=(), pose: np.ndarray | None = None, t: float = 0.0
+    frame_id: str,
+    depth: np.ndarray,
+    detections: Iterable[Detection] = (),
+    pose: np.ndarray | None = None,
+    t: float = 0.0,
 ) -> Frame:
     """A frame of the test camera."""
     return Frame(
@@ -65,9 +71,9 @@ def scene_batch(
     objects: dict[str, tuple[tuple[float, float, float], float]],
     *,
     detect: set[str] | None = None,
-    occluders=(),
-    pose=None,
-    embeddings=None,
+    occluders: Iterable[tuple[tuple[float, float, float], float]] = (),
+    pose: np.ndarray | None = None,
+    embeddings: dict[str, np.ndarray] | None = None,
 ) -> Batch:
     """One-frame batch of a wall with cubes; `detect` names the cubes that get a mask."""
     depth = wall()

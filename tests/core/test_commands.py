@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
+from typing import Any
+
 import pytest
 
 from core.baseline import decide_freeze, decide_load, package_sha256
@@ -9,7 +12,7 @@ from core.decide import decide
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
 from core.evolve import fold
 from core.inspection import decide_inspection
-from core.state import SceneState
+from core.state import SceneState, Track, Vec3
 from core.verification import decide_verdict
 from sim.world import object_on
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame
@@ -17,19 +20,22 @@ from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches
 AMBIGUOUS = {"table": {"table": 0.50, "desk": 0.48}, "counter": {"counter": 0.6, "table": 0.3}}
 
 
-def discover(scores=None, views=None):
+def discover(
+    scores: Mapping[str, Mapping[str, float]] | None = None,
+    views: Sequence[tuple[Vec3, Vec3]] | None = None,
+) -> SceneState:
     state = SceneState()
-    kwargs = {} if scores is None else {"scores": scores}
+    kwargs: dict[str, Any] = {} if scores is None else {"scores": scores}
     for batch in batches(ROOM, views or (TABLE_VIEWS + COUNTER_VIEWS) * 2, "b", **kwargs):
         state = fold(state, decide(state, batch))
     return state
 
 
-def fixture(state, label):
+def fixture(state: SceneState, label: str) -> Track:
     return next(t for t in state.tracks.values() if t.kind == "fixture" and t.label == label)
 
 
-def test_confirm_verdict_weighs_three_and_publishes():
+def test_confirm_verdict_weighs_three_and_publishes() -> None:
     state = discover(AMBIGUOUS, TABLE_VIEWS * 3)
     table = fixture(state, "table")
     assert table.verification == "pending"
@@ -41,7 +47,7 @@ def test_confirm_verdict_weighs_three_and_publishes():
     assert after.lifecycle == "confirmed" and after.verification == "confirmed"
 
 
-def test_reject_verdict_retires_for_good_and_a_second_verdict_needs_a_new_frame():
+def test_reject_verdict_retires_for_good_and_a_second_verdict_needs_a_new_frame() -> None:
     state = discover(AMBIGUOUS, TABLE_VIEWS * 3)
     table_id = fixture(state, "table").track_id
     state = fold(state, decide_verdict(state, table_id, "reject", None, "vlm", "b2"))
@@ -55,7 +61,7 @@ def test_reject_verdict_retires_for_good_and_a_second_verdict_needs_a_new_frame(
     assert sum(t.kind == "fixture" and t.label == "table" for t in state.tracks.values()) == 1
 
 
-def test_verdict_errors_name_the_field():
+def test_verdict_errors_name_the_field() -> None:
     state = discover()
     with pytest.raises(UnknownTrack):
         decide_verdict(state, "trk-999999", "confirm", None, "vlm", None)
@@ -63,7 +69,7 @@ def test_verdict_errors_name_the_field():
         decide_verdict(state, fixture(state, "table").track_id, "confirm", "spaceship", "vlm", None)
 
 
-def test_freeze_pins_and_a_new_session_keeps_the_identities():
+def test_freeze_pins_and_a_new_session_keeps_the_identities() -> None:
     state = discover()
     events, package = decide_freeze(state, "scn-a")
     assert events[0].details()["sha256"] == package_sha256(package)
@@ -80,7 +86,7 @@ def test_freeze_pins_and_a_new_session_keeps_the_identities():
         decide_freeze(SceneState(), "scn-empty")
 
 
-def test_inspection_grounds_children_on_the_fixture_only():
+def test_inspection_grounds_children_on_the_fixture_only() -> None:
     state = discover()
     table = fixture(state, "table")
     world = ROOM.with_object(object_on(TABLE, "book", "book", (0.2, 0.15, 0.05), at=(-0.3, 0.1)))
@@ -95,7 +101,7 @@ def test_inspection_grounds_children_on_the_fixture_only():
     assert after.tracks[table.track_id].inspection_status == "completed"
 
 
-def test_inspection_refuses_what_is_not_a_confirmed_fixture():
+def test_inspection_refuses_what_is_not_a_confirmed_fixture() -> None:
     state = discover(views=TABLE_VIEWS[:1])
     view = frame(ROOM, (2.0, 1.2, 1.5), (2.0, 2.0, 0.75), "insp")
     young = next(t for t in state.tracks.values() if t.kind == "fixture")

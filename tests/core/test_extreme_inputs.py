@@ -12,10 +12,10 @@ from hypothesis import strategies as st
 
 from core.decide import decide
 from core.event_records import event_from_record, event_to_record, non_finite_field
-from core.events import SceneCreated
+from core.events import Event, SceneCreated
 from core.evolve import evolve, fold
 from core.masks import Mask
-from core.observation import Batch, Detection, Frame, Intrinsics
+from core.observation import Batch, Detection, DetectionKind, Frame, Intrinsics
 from core.params import Params
 from core.state import SceneState
 
@@ -56,7 +56,7 @@ def frames(draw: st.DrawFn, index: int) -> Frame:
         mask = np.zeros((HEIGHT, WIDTH), dtype=bool)
         top, left = draw(st.integers(0, HEIGHT - 1)), draw(st.integers(0, WIDTH - 1))
         mask[top:, left:] = True
-        kind = draw(st.sampled_from(["object", "fixture"]))
+        kind: DetectionKind = draw(st.sampled_from(["object", "fixture"]))
         scores = {"table": draw(SCORE), "desk": draw(SCORE)} if kind == "fixture" else None
         embedding = np.array([draw(EMBEDDING) for _ in range(4)]) if draw(st.booleans()) else None
         label = "table" if kind == "fixture" else draw(st.sampled_from(["mug", "cup"]))
@@ -81,7 +81,7 @@ def test_extreme_finite_inputs_make_only_finite_replayable_events(data: st.DataO
     )
     created = SceneCreated(name="extreme", params=params.to_dict())
     state = evolve(SceneState(), created)
-    log = [created]
+    log: list[Event] = [created]
     seen = data.draw(frames(0))
     for index in range(data.draw(st.integers(1, 6))):
         # The same view again (updates), the view with nothing detected (visible misses), or

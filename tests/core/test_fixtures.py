@@ -3,19 +3,22 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 
 from core.decide import decide
+from core.events import Event
 from core.evolve import fold
 from core.fixtures import FixtureProposal, FixtureTrackView, associate_fixtures, dbscan, kept_voxels
+from core.observation import Batch
 from core.params import FixtureParams
-from core.state import SceneState
+from core.state import SceneState, Track
 from tests.core.rendered import COUNTER, COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches
 
 
-def run(state, batch_list):
-    events = []
+def run(state: SceneState, batch_list: Iterable[Batch]) -> tuple[SceneState, list[Event]]:
+    events: list[Event] = []
     for batch in batch_list:
         new = decide(state, batch)
         state = fold(state, new)
@@ -23,11 +26,11 @@ def run(state, batch_list):
     return state, events
 
 
-def fixtures_of(state):
+def fixtures_of(state: SceneState) -> list[Track]:
     return [t for t in state.tracks.values() if t.kind == "fixture"]
 
 
-def test_dbscan_separates_blobs_and_drops_noise():
+def test_dbscan_separates_blobs_and_drops_noise() -> None:
     rng = np.random.default_rng(0)
     blob_a = rng.normal([0, 0, 0], 0.02, size=(30, 3))
     blob_b = rng.normal([1, 0, 0], 0.02, size=(30, 3))
@@ -37,7 +40,7 @@ def test_dbscan_separates_blobs_and_drops_noise():
     assert labels[0] != labels[30] and labels[60] == -1
 
 
-def test_voxels_need_the_class_threshold_and_a_margin():
+def test_voxels_need_the_class_threshold_and_a_margin() -> None:
     params = FixtureParams(
         taxonomy=("table", "desk"), default_class_threshold=0.4, min_class_margin=0.05
     )
@@ -50,7 +53,7 @@ def test_voxels_need_the_class_threshold_and_a_margin():
     assert math.isclose(margins[1], 0.03)
 
 
-def test_residual_cluster_inside_a_matched_fixture_is_absorbed():
+def test_residual_cluster_inside_a_matched_fixture_is_absorbed() -> None:
     params = FixtureParams()
     track = FixtureTrackView("trk-000001", "table", (2.0, 2.0, 0.375), (1.4, 0.8, 0.75))
     whole = FixtureProposal(
@@ -66,7 +69,7 @@ def test_residual_cluster_inside_a_matched_fixture_is_absorbed():
     assert matches == {0: "trk-000001"} and absorbed == {1: "trk-000001"}
 
 
-def test_partial_views_give_one_confirmed_fixture_each_with_right_label_and_center():
+def test_partial_views_give_one_confirmed_fixture_each_with_right_label_and_center() -> None:
     views = [*TABLE_VIEWS, *COUNTER_VIEWS] * 2
     state, events = run(SceneState(), batches(ROOM, views, "b", objects=False))
     found = fixtures_of(state)
@@ -79,13 +82,14 @@ def test_partial_views_give_one_confirmed_fixture_each_with_right_label_and_cent
     assert len(confirms) == 2 and len({e.track_id for e in confirms}) == 2
 
 
-def test_conflicting_class_scores_wait_for_verification():
+def test_conflicting_class_scores_wait_for_verification() -> None:
     scores = {"table": {"table": 0.50, "desk": 0.48}, "counter": {"counter": 0.6, "table": 0.3}}
     state, events = run(
         SceneState(), batches(ROOM, TABLE_VIEWS * 3, "b", scores=scores, objects=False)
     )
     requested = [e for e in events if e.type == "verification_requested"]
     assert len(requested) == 1
+    assert requested[0].track_id is not None
     table = state.tracks[requested[0].track_id]
     assert table.lifecycle == "tentative" and table.verification == "pending"
     assert (
@@ -100,7 +104,9 @@ def test_conflicting_class_scores_wait_for_verification():
     )
 
 
-def test_mug_on_the_table_gets_the_table_as_parent_and_carried_to_the_counter_reparents_once():
+def test_mug_on_the_table_gets_the_table_as_parent_and_carried_to_the_counter_reparents_once() -> (
+    None
+):
     state, events = run(SceneState(), batches(ROOM, TABLE_VIEWS * 3 + COUNTER_VIEWS * 3, "b"))
     table_id = next(t.track_id for t in fixtures_of(state) if t.label == "table")
     counter_id = next(t.track_id for t in fixtures_of(state) if t.label == "counter")

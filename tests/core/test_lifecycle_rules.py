@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 
 import numpy as np
 
 from core.decide import decide
+from core.events import Event
 from core.evolve import fold
 from core.masks import Mask
+from core.observation import Batch
 from core.params import Params
 from core.state import SceneState
 from tests.core.scenes import look_pose, scene_batch
@@ -16,9 +19,9 @@ from tests.core.scenes import look_pose, scene_batch
 MUG = {"mug_1": ((0.2, 0.1, 2.0), 0.1)}
 
 
-def run(state, batches):
+def run(state: SceneState, batches: Iterable[Batch]) -> tuple[SceneState, list[list[Event]]]:
     """Fold each batch's events into the state; return the state and the events per batch."""
-    per_batch = []
+    per_batch: list[list[Event]] = []
     for batch in batches:
         events = decide(state, batch)
         state = fold(state, events)
@@ -26,11 +29,11 @@ def run(state, batches):
     return state, per_batch
 
 
-def types(events):
+def types(events: Iterable[Event]) -> list[str]:
     return [e.type for e in events]
 
 
-def test_first_sighting_is_a_hypothesis_and_second_batch_confirms():
+def test_first_sighting_is_a_hypothesis_and_second_batch_confirms() -> None:
     state, per_batch = run(SceneState(), [scene_batch("b0", MUG), scene_batch("b1", MUG)])
     assert types(per_batch[0]) == ["add"]
     assert per_batch[0][0].state == "tentative"
@@ -42,7 +45,7 @@ def test_first_sighting_is_a_hypothesis_and_second_batch_confirms():
     assert math.dist(track.center, (0.2, 0.1, 2.0)) < 0.06
 
 
-def test_two_frames_of_one_batch_confirm_nothing():
+def test_two_frames_of_one_batch_confirm_nothing() -> None:
     """Cross-batch confirmation: two sightings in one batch are one batch."""
     batch = scene_batch("b0", MUG)
     double = type(batch)("b0", (batch.frames[0], batch.frames[0]))
@@ -52,7 +55,7 @@ def test_two_frames_of_one_batch_confirm_nothing():
     assert len(per_batch[0][0].details()["observations"]) == 2
 
 
-def test_taken_away_in_view_is_removed_after_visible_misses():
+def test_taken_away_in_view_is_removed_after_visible_misses() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     state, per_batch = run(state, [scene_batch(f"m{i}", MUG, detect=set()) for i in range(15)])
     flat = [e for events in per_batch for e in events]
@@ -65,7 +68,7 @@ def test_taken_away_in_view_is_removed_after_visible_misses():
     assert state.tracks["trk-000001"].lifecycle == "removed"
 
 
-def test_removal_needs_three_visible_misses_even_when_p_is_low():
+def test_removal_needs_three_visible_misses_even_when_p_is_low() -> None:
     params = Params.from_dict({"existence": {"eta_missed": 5.0}})
     state = SceneState(params=params)
     state, _ = run(state, [scene_batch(f"b{i}", MUG) for i in range(2)])
@@ -74,7 +77,7 @@ def test_removal_needs_three_visible_misses_even_when_p_is_low():
     assert "remove" in types(per_batch[2])
 
 
-def test_occluded_object_gets_no_negative_evidence():
+def test_occluded_object_gets_no_negative_evidence() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     before = state.tracks["trk-000001"]
     occluder = ((0.2, 0.1, 1.2), 0.5)  # undetected, closer than the mug, covers it
@@ -87,7 +90,7 @@ def test_occluded_object_gets_no_negative_evidence():
     assert after.visible_misses == 0 and after.lifecycle == "confirmed"
 
 
-def test_out_of_view_object_gets_no_negative_evidence():
+def test_out_of_view_object_gets_no_negative_evidence() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     before = state.tracks["trk-000001"].existence_logodds
     away = look_pose(120.0)
@@ -96,7 +99,7 @@ def test_out_of_view_object_gets_no_negative_evidence():
     assert state.tracks["trk-000001"].existence_logodds == before
 
 
-def test_small_motion_emits_move_with_same_identity():
+def test_small_motion_emits_move_with_same_identity() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     moved = {"mug_1": ((0.7, 0.1, 2.0), 0.1)}
     state, per_batch = run(state, [scene_batch("mv", moved), scene_batch("mv2", moved)])
@@ -115,7 +118,7 @@ EMPTY: dict[str, tuple[tuple[float, float, float], float]] = {}  # the wall alon
 FAR = {"mug_1": ((-0.6, 0.1, 1.5), 0.1)}  # about 0.94 m from MUG: beyond the 0.8 m gate
 
 
-def test_large_motion_recovers_identity_once_its_place_was_seen_empty():
+def test_large_motion_recovers_identity_once_its_place_was_seen_empty() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     # Its place seen empty once, then again in the frame that shows it far away: two misses
     # establish the absence, and the mug far away takes its identity back.
@@ -127,7 +130,7 @@ def test_large_motion_recovers_identity_once_its_place_was_seen_empty():
     assert list(state.tracks) == ["trk-000001"]
 
 
-def test_the_fallback_never_takes_the_identity_of_an_object_still_in_place():
+def test_the_fallback_never_takes_the_identity_of_an_object_still_in_place() -> None:
     # mug_1 stays where it is; the robot turns away and sees a second mug elsewhere.
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     other = {"mug_2": ((0.0, 0.1, 2.0), 0.1)}
@@ -146,7 +149,7 @@ def test_the_fallback_never_takes_the_identity_of_an_object_still_in_place():
     assert types(per_batch[0])[0] == "add" and len(state.tracks) == 3
 
 
-def test_appearance_picks_which_missing_mug_a_far_sighting_is():
+def test_appearance_picks_which_missing_mug_a_far_sighting_is() -> None:
     rng = np.random.default_rng(11)
     a, b = rng.normal(size=32), rng.normal(size=32)
     mugs = {"mug_1": ((0.3, 0.1, 2.0), 0.12), "mug_2": ((-0.3, 0.1, 2.0), 0.12)}
@@ -164,7 +167,7 @@ def test_appearance_picks_which_missing_mug_a_far_sighting_is():
     assert len(state.tracks) == 2
 
 
-def test_fallback_refuses_when_appearance_conflicts():
+def test_fallback_refuses_when_appearance_conflicts() -> None:
     rng = np.random.default_rng(3)
     a, b = rng.normal(size=16), rng.normal(size=16)
     state, _ = run(
@@ -176,7 +179,7 @@ def test_fallback_refuses_when_appearance_conflicts():
     assert len(state.tracks) == 2
 
 
-def test_appearance_gate_separates_two_nearby_instances_of_one_class():
+def test_appearance_gate_separates_two_nearby_instances_of_one_class() -> None:
     rng = np.random.default_rng(5)
     a, b = rng.normal(size=16), rng.normal(size=16)
     objects = {"mug_1": ((0.0, 0.1, 2.0), 0.1), "mug_2": ((0.3, 0.1, 2.0), 0.1)}
@@ -195,7 +198,7 @@ def test_appearance_gate_separates_two_nearby_instances_of_one_class():
     assert all(e.type == "update" for e in per_batch[0])
 
 
-def test_removed_track_regains_identity_on_reassociation():
+def test_removed_track_regains_identity_on_reassociation() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     state, _ = run(state, [scene_batch(f"m{i}", MUG, detect=set()) for i in range(12)])
     assert state.tracks["trk-000001"].lifecycle == "removed"
@@ -206,7 +209,7 @@ def test_removed_track_regains_identity_on_reassociation():
     assert state.tracks["trk-000001"].lifecycle == "confirmed"
 
 
-def test_clamp_keeps_a_long_seen_object_removable():
+def test_clamp_keeps_a_long_seen_object_removable() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(60)])
     assert state.tracks["trk-000001"].existence_logodds == state.params.existence.logodds_max
     state, per_batch = run(state, [scene_batch(f"m{i}", MUG, detect=set()) for i in range(15)])
@@ -214,12 +217,12 @@ def test_clamp_keeps_a_long_seen_object_removable():
     assert removal_batch + 1 == 9  # ceil((4 + logit(0.88)) / 0.7)
 
 
-def test_mask_with_too_little_valid_depth_is_rejected():
+def test_mask_with_too_little_valid_depth_is_rejected() -> None:
     batch = scene_batch("b0", {"mug_1": ((0.2, 0.1, 2.0), 0.02)})  # a few pixels only
     assert decide(SceneState(), batch) == []
 
 
-def test_boundary_leak_does_not_drag_the_center():
+def test_boundary_leak_does_not_drag_the_center() -> None:
     # 9 px of cube and a 2 px rim of wall: more leaked pixels than object pixels
     batch = scene_batch("b0", {"mug_1": ((0.2, 0.1, 2.0), 0.14)})
     frame = batch.frames[0]
@@ -244,7 +247,7 @@ def test_boundary_leak_does_not_drag_the_center():
     assert math.dist(center, (0.2, 0.1, 1.93)) < 0.03
 
 
-def test_decide_is_deterministic():
+def test_decide_is_deterministic() -> None:
     batches = [scene_batch(f"b{i}", MUG) for i in range(3)]
     first = [
         [(e.type, e.track_id, e.details()) for e in ev] for ev in run(SceneState(), batches)[1]
@@ -255,7 +258,7 @@ def test_decide_is_deterministic():
     assert first == second
 
 
-def test_square_erosion_matches_scipy():
+def test_square_erosion_matches_scipy() -> None:
     from scipy import ndimage
 
     from core.geometry import erode_square
@@ -267,14 +270,14 @@ def test_square_erosion_matches_scipy():
         assert np.array_equal(erode_square(mask, 2), expected)
 
 
-def at_time(batch, seconds):
+def at_time(batch: Batch, seconds: float) -> Batch:
     """The batch with its frame stamped at `seconds`."""
     from dataclasses import replace
 
     return type(batch)(batch.batch_id, tuple(replace(f, timestamp=seconds) for f in batch.frames))
 
 
-def test_without_the_visibility_gate_an_occluded_object_is_removed():
+def test_without_the_visibility_gate_an_occluded_object_is_removed() -> None:
     from core.rules import UpdateRules
 
     rules = UpdateRules(visibility_gate=False)
@@ -292,7 +295,7 @@ def test_without_the_visibility_gate_an_occluded_object_is_removed():
     assert state.tracks["trk-000001"].lifecycle == "removed"
 
 
-def test_without_persistent_identity_a_returning_object_gets_a_new_identity():
+def test_without_persistent_identity_a_returning_object_gets_a_new_identity() -> None:
     from core.rules import UpdateRules
 
     rules = UpdateRules(identity_memory_s=1.0)
@@ -310,7 +313,7 @@ def test_without_persistent_identity_a_returning_object_gets_a_new_identity():
     assert decide(state, at_time(scene_batch("back", MUG), 5.0))[0].track_id == "trk-000001"
 
 
-def test_an_append_only_memory_never_removes():
+def test_an_append_only_memory_never_removes() -> None:
     from core.rules import UpdateRules
 
     rules = UpdateRules(removal=False)

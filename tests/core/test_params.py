@@ -1,12 +1,14 @@
 """The parameter tree: the paper's numbers, overrides, and validation."""
 
+from typing import Any
+
 import pytest
 
 from core.errors import InvalidParams
 from core.params import Params
 
 
-def test_paper_constants():
+def test_paper_constants() -> None:
     params = Params()
     assert params.association.max_center_distance_m == 0.8
     assert params.association.min_appearance_cosine == 0.78
@@ -37,7 +39,7 @@ def test_paper_constants():
     assert params.fusion.max_recent_centers == 32 and params.fusion.fixture_center_alpha == 0.35
 
 
-def test_round_trip_and_partial_override():
+def test_round_trip_and_partial_override() -> None:
     params = Params.from_dict({"lifecycle": {"move_min_distance_m": 0.5}})
     assert params.lifecycle.move_min_distance_m == 0.5
     assert params.lifecycle.confirm_min_p_exist == 0.72
@@ -81,14 +83,14 @@ def test_round_trip_and_partial_override():
         ({"fixtures": {"size_limits": {"bench": [1, 1, 1, 0, 0, 0]}}}, "params.fixtures", "bench"),
     ],
 )
-def test_bad_overrides_name_the_field(overrides, field, reason):
+def test_bad_overrides_name_the_field(overrides: dict[str, Any], field: str, reason: str) -> None:
     with pytest.raises(InvalidParams) as raised:
         Params.from_dict(overrides)
     assert raised.value.field == field
     assert raised.value.detail.startswith(f"{field}: ") and reason in raised.value.detail
 
 
-def test_per_class_maps_merge_key_by_key():
+def test_per_class_maps_merge_key_by_key() -> None:
     params = Params.from_dict(
         {"fixtures": {"size_limits": {"bench": [0.8, 0.3, 0.3, 2.5, 0.8, 0.6]}}}
     )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from functools import reduce
+from typing import Any
 
 import numpy as np
 import orjson
@@ -12,7 +13,7 @@ from hypothesis import strategies as st
 
 from core.decide import decide
 from core.event_records import event_from_record, event_to_record
-from core.events import SceneCreated
+from core.events import Event, SceneCreated
 from core.evolve import evolve, fold
 from core.params import Params
 from core.state import SceneState
@@ -29,11 +30,11 @@ step = st.fixed_dictionaries(
 )
 
 
-def live_run(steps):
+def live_run(steps: list[dict[str, Any]]) -> tuple[list[Event], SceneState]:
     """Decide and fold batch by batch, as the worker does; return the log and the live state."""
     created = SceneCreated(name="prop", params=Params().to_dict())
     state = evolve(SceneState(), created)
-    log = [created]
+    log: list[Event] = [created]
     for i, s in enumerate(steps):
         objects = {
             name: (POSITIONS[s[name]], 0.12 if name == "mug_1" else 0.2)
@@ -52,7 +53,7 @@ def live_run(steps):
 
 @settings(max_examples=40, deadline=None)
 @given(st.lists(step, min_size=1, max_size=14))
-def test_replay_of_the_serialized_log_equals_the_live_state(steps):
+def test_replay_of_the_serialized_log_equals_the_live_state(steps: list[dict[str, Any]]) -> None:
     log, live = live_run(steps)
     records = orjson.loads(orjson.dumps([event_to_record(e) for e in log]))
     replayed = reduce(evolve, (event_from_record(r) for r in records), SceneState())
@@ -71,7 +72,9 @@ def test_replay_of_the_serialized_log_equals_the_live_state(steps):
 
 @settings(max_examples=40, deadline=None)
 @given(st.lists(step, min_size=1, max_size=14), st.data())
-def test_snapshot_plus_tail_equals_full_replay_and_prefixes_are_stable(steps, data):
+def test_snapshot_plus_tail_equals_full_replay_and_prefixes_are_stable(
+    steps: list[dict[str, Any]], data: st.DataObject
+) -> None:
     log, live = live_run(steps)
     cut = data.draw(st.integers(min_value=0, max_value=len(log)))
     prefix_state = fold(SceneState(), log[:cut])
@@ -82,7 +85,7 @@ def test_snapshot_plus_tail_equals_full_replay_and_prefixes_are_stable(steps, da
     assert prefix_state.head_seq == cut - 1
 
 
-def test_evolved_copies_fields_and_drops_the_cached_label():
+def test_evolved_copies_fields_and_drops_the_cached_label() -> None:
     _log, live = live_run([{"mug_1": 0, "book_1": None, "detect": {"mug_1"}, "occlude": False}])
     track = next(iter(live.tracks.values()))
     assert track.label == "mug"

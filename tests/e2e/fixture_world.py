@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
+from typing import Any
+
 import numpy as np
 
+from core.state import Vec3
 from sim.camera import look_at
 from sim.detector import detect, detect_fixtures
 from sim.render import render
@@ -24,8 +28,14 @@ DISCOVERY = [*TABLE_VIEWS, *COUNTER_VIEWS] * 2
 
 
 def wire_frame(
-    world: World, view, frame_id: str, *, ambiguity=None, objects: bool = True, seed: int = 0
-) -> dict:
+    world: World,
+    view: tuple[Vec3, Vec3],
+    frame_id: str,
+    *,
+    ambiguity: Mapping[str, Mapping[str, float]] | None = None,
+    objects: bool = True,
+    seed: int = 0,
+) -> dict[str, Any]:
     """One rendered frame with fixture masks (class scores) and object masks, in the wire format."""
     eye, target = view
     pose = look_at(eye, target)
@@ -39,7 +49,9 @@ def wire_frame(
     return make_frame(frame_id, 0.0, CAMERA, pose, rendered.depth, detections)
 
 
-def wire_batches(world: World, views, prefix: str, **kwargs) -> list[dict]:
+def wire_batches(
+    world: World, views: Iterable[tuple[Vec3, Vec3]], prefix: str, **kwargs: Any
+) -> list[dict[str, Any]]:
     """One single-frame batch per viewpoint."""
     return [
         make_batch(f"{prefix}{i}", [wire_frame(world, view, f"{prefix}{i}", **kwargs)])

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from sim.camera import CameraModel, look_at
@@ -24,7 +26,7 @@ def eye_for(index: int) -> tuple[float, float, float]:
     return (2.7 + 0.15 * (index % 5), 1.2, 1.4)
 
 
-def frame(world: World, index: int, *, look_away: bool = False, seed: int = 0) -> dict:
+def frame(world: World, index: int, *, look_away: bool = False, seed: int = 0) -> dict[str, Any]:
     """One rendered, noised and detected frame."""
     eye = eye_for(index)
     target = (eye[0], -3.0, 1.0) if look_away else tuple(MUG_CENTER)
@@ -38,6 +40,6 @@ def frame(world: World, index: int, *, look_away: bool = False, seed: int = 0) -
     return make_frame(f"f{index:05d}", float(index), CAMERA, pose, depth, detections)
 
 
-def batch(batch_id: str, world: World, index: int, **kwargs) -> dict:
+def batch(batch_id: str, world: World, index: int, **kwargs: Any) -> dict[str, Any]:
     """A one-frame batch."""
     return make_batch(batch_id, [frame(world, index, **kwargs)])

@@ -8,10 +8,13 @@ import subprocess
 import sys
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import httpx
 import pytest
+from fastapi.testclient import TestClient
 
 from service.app import create_app
 from service.bootstrap import build_container
@@ -25,28 +28,31 @@ from tests.e2e.simworld import WORLD, batch
 BATCHES = 20
 PBDAG = [sys.executable, "-m", "service.cli"]
 REPO = Path(__file__).resolve().parents[2]
+# The graph's nodes, the event count of each batch, and every event's (type, track, state).
+Outcome = tuple[list[dict[str, Any]], dict[str, int], list[tuple[Any, Any, Any]]]
 
 
-def start(args, env, log: Path) -> subprocess.Popen:
+def start(args: list[str], env: dict[str, str], log: Path) -> subprocess.Popen[bytes]:
     with log.open("ab") as handle:  # the child keeps its own descriptor
         return subprocess.Popen(
             [*PBDAG, *args], env=env, cwd=REPO, stdout=handle, stderr=subprocess.STDOUT
         )
 
 
-def stream():
+def stream() -> list[dict[str, Any]]:
     """20 one-frame batches: the mug is seen, then taken away."""
     empty = WORLD.without("mug")
     return [batch(f"b{i:02d}", WORLD if i < 8 else empty, i) for i in range(BATCHES)]
 
 
-def outcome(client, scene_id):
+def outcome(client: httpx.Client | TestClient, scene_id: str) -> Outcome:
     """What must match an uninterrupted run: the graph and each batch's event count."""
     graph = client.get(f"/v1/scenes/{scene_id}/graph", params={"include": "all"}).json()
     nodes = [
         {k: n[k] for k in ("id", "label", "state", "p_exist", "center")} for n in graph["nodes"]
     ]
-    events, after = [], -1
+    events: list[dict[str, Any]] = []
+    after: int | None = -1
     while after is not None:
         page = client.get(
             f"/v1/scenes/{scene_id}/events", params={"after": after, "limit": 1000}
@@ -58,7 +64,7 @@ def outcome(client, scene_id):
 
 
 @pytest.fixture(scope="module")
-def reference(tmp_path_factory):
+def reference(tmp_path_factory: pytest.TempPathFactory) -> Outcome:
     """The uninterrupted run, in process."""
     container = build_container(
         Settings(data_dir=tmp_path_factory.mktemp("reference"), allow_anonymous_local=True)
@@ -71,7 +77,9 @@ def reference(tmp_path_factory):
         return outcome(client, scene_id)
 
 
-def run_with_kill(url: str, start_all, log: Path) -> tuple:
+def run_with_kill(
+    url: str, start_all: Callable[[Path], list[subprocess.Popen[bytes]]], log: Path
+) -> Outcome:
     """Post 20 batches, SIGKILL every process right after the last 202, restart, wait for done."""
     processes = start_all(log)
     wait_healthy(url)
@@ -107,7 +115,9 @@ def run_with_kill(url: str, start_all, log: Path) -> tuple:
 
 
 @pytest.mark.parametrize("backend", store_backends())
-def test_sigkill_right_after_accepting_recovers_exactly_once(reference, tmp_path, backend, request):
+def test_sigkill_right_after_accepting_recovers_exactly_once(
+    reference: Outcome, tmp_path: Path, backend: str, request: pytest.FixtureRequest
+) -> None:
     """SQLite: `pbdag serve` with its worker. PostgreSQL: `serve --no-worker` and two `pbdag worker`."""
     port = free_port()
     env = {
@@ -125,7 +135,7 @@ def test_sigkill_right_after_accepting_recovers_exactly_once(reference, tmp_path
         env["PBDAG_DATABASE_URL"] = f"{url}?options=-csearch_path%3D{schema}"
         commands = [["serve", "--port", str(port), "--no-worker"], ["worker"], ["worker"]]
 
-    def start_all(log: Path) -> list[subprocess.Popen]:
+    def start_all(log: Path) -> list[subprocess.Popen[bytes]]:
         return [start(command, env, log) for command in commands]
 
     assert (

@@ -3,35 +3,40 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
+from typing import Any
 
 import pytest
+from fastapi.testclient import TestClient
 
 from service.app import create_app
+from service.bootstrap import Container
 from service.store.projection import rebuild_scene
 from service.worker import Worker
 from tests.clients import local_client
+from tests.core.rendered import COUNTER, COUNTER_VIEWS, TABLE, TABLE_VIEWS
 from tests.e2e.fixture_world import (
     AWAY_VIEW,
     CLOSE_VIEW,
-    COUNTER,
-    COUNTER_VIEWS,
     DISCOVERY,
     FINE,
     ROOM,
-    TABLE,
-    TABLE_VIEWS,
     wire_batches,
     wire_frame,
 )
 
+Api = tuple[TestClient, Worker, Container]  # a client on the app, the worker it drives, the store
+
 
 @pytest.fixture
-def api(container):
+def api(container: Container) -> Iterator[Api]:
     with local_client(create_app(container)) as client:
         yield client, Worker(container), container
 
 
-def feed(client, worker, scene_id, bodies):
+def feed(
+    client: TestClient, worker: Worker, scene_id: str, bodies: Sequence[dict[str, Any]]
+) -> None:
     for body in bodies:
         assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code == 202
     worker.drain()
@@ -42,21 +47,23 @@ def feed(client, worker, scene_id, bodies):
         )
 
 
-def nodes(client, scene_id, **params):
-    return client.get(f"/v1/scenes/{scene_id}/graph", params=params).json()["nodes"]
+def nodes(client: TestClient, scene_id: str, **params: str) -> list[dict[str, Any]]:
+    graph = client.get(f"/v1/scenes/{scene_id}/graph", params=params).json()
+    found: list[dict[str, Any]] = graph["nodes"]
+    return found
 
 
-def discovered(client, worker, **kwargs):
-    scene_id = client.post("/v1/scenes", json={"name": "house"}).json()["id"]
+def discovered(client: TestClient, worker: Worker, **kwargs: Any) -> str:
+    scene_id: str = client.post("/v1/scenes", json={"name": "house"}).json()["id"]
     feed(client, worker, scene_id, wire_batches(ROOM, DISCOVERY, "d", **kwargs))
     return scene_id
 
 
-def fixture_ids(client, scene_id):
+def fixture_ids(client: TestClient, scene_id: str) -> dict[str, str]:
     return {n["label"]: n["id"] for n in nodes(client, scene_id) if n["kind"] == "fixture"}
 
 
-def test_each_fixture_confirmed_once_with_label_center_and_the_mug_on_the_table(api):
+def test_each_fixture_confirmed_once_with_label_center_and_the_mug_on_the_table(api: Api) -> None:
     client, worker, _ = api
     scene_id = discovered(client, worker)
     fixtures = [n for n in nodes(client, scene_id) if n["kind"] == "fixture"]
@@ -76,7 +83,7 @@ def test_each_fixture_confirmed_once_with_label_center_and_the_mug_on_the_table(
     assert {"source": on_table[0]["id"], "target": ids["table"], "relation": "on"} in graph["edges"]
 
 
-def test_mug_carried_to_the_counter_reparents_once_and_keeps_its_identity(api):
+def test_mug_carried_to_the_counter_reparents_once_and_keeps_its_identity(api: Api) -> None:
     client, worker, _ = api
     scene_id = discovered(client, worker)
     ids = fixture_ids(client, scene_id)
@@ -98,7 +105,7 @@ def test_mug_carried_to_the_counter_reparents_once_and_keeps_its_identity(api):
 
 
 @pytest.mark.parametrize("verdict", ["confirm", "reject"])
-def test_conflicting_fixture_waits_for_a_verdict(api, verdict):
+def test_conflicting_fixture_waits_for_a_verdict(api: Api, verdict: str) -> None:
     client, worker, _ = api
     ambiguous = {"table": {"table": 0.50, "desk": 0.48}}
     scene_id = discovered(client, worker, ambiguity=ambiguous)
@@ -125,7 +132,7 @@ def test_conflicting_fixture_waits_for_a_verdict(api, verdict):
     assert again.status_code == 409 and again.json()["field"] == "frame_id"
 
 
-def test_baseline_is_reproducible_pins_its_fixtures_and_seeds_a_new_session(api):
+def test_baseline_is_reproducible_pins_its_fixtures_and_seeds_a_new_session(api: Api) -> None:
     client, worker, container = api
     scene_id = discovered(client, worker)
     frozen = client.post(f"/v1/scenes/{scene_id}/baselines")
@@ -157,7 +164,7 @@ def test_baseline_is_reproducible_pins_its_fixtures_and_seeds_a_new_session(api)
     assert fixture_ids(client, later_id) == ids  # re-observed, not duplicated
 
 
-def test_inspection_attaches_three_children_and_later_moves_keep_their_identity(api):
+def test_inspection_attaches_three_children_and_later_moves_keep_their_identity(api: Api) -> None:
     client, worker, _ = api
     scene_id = discovered(client, worker)
     ids = fixture_ids(client, scene_id)
@@ -203,11 +210,11 @@ def test_inspection_attaches_three_children_and_later_moves_keep_their_identity(
     assert [n["id"] for n in nodes(client, scene_id, label="bowl")] == [children["bowl"]["id"]]
 
 
-def test_failed_capture_keeps_the_fixture_queued_for_a_bounded_retry(api):
+def test_failed_capture_keeps_the_fixture_queued_for_a_bounded_retry(api: Api) -> None:
     client, worker, _ = api
     scene_id = discovered(client, worker)
     table_id = fixture_ids(client, scene_id)["table"]
-    statuses = []
+    statuses: list[str | None] = []
     for attempt in range(3):
         body = {"fixture_id": table_id, "frames": [wire_frame(ROOM, AWAY_VIEW, f"away-{attempt}")]}
         capture = client.post(f"/v1/scenes/{scene_id}/inspections", json=body).json()
@@ -221,7 +228,7 @@ def test_failed_capture_keeps_the_fixture_queued_for_a_bounded_retry(api):
     assert statuses == [None, None, "abandoned"]
 
 
-def test_bad_commands_get_a_clear_4xx_and_change_nothing(api):
+def test_bad_commands_get_a_clear_4xx_and_change_nothing(api: Api) -> None:
     client, worker, _ = api
     scene_id = discovered(client, worker)
     head = client.get(f"/v1/scenes/{scene_id}").json()["head_seq"]
@@ -290,7 +297,7 @@ def test_bad_commands_get_a_clear_4xx_and_change_nothing(api):
     assert len(client.get("/v1/scenes").json()["scenes"]) == 1
 
 
-def test_inspection_of_an_unconfirmed_fixture_is_a_409(api):
+def test_inspection_of_an_unconfirmed_fixture_is_a_409(api: Api) -> None:
     client, worker, _ = api
     scene_id = client.post("/v1/scenes", json={"name": "young"}).json()["id"]
     feed(client, worker, scene_id, wire_batches(ROOM, TABLE_VIEWS[:1], "y"))

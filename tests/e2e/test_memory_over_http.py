@@ -2,57 +2,66 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from typing import Any
+
 import numpy as np
 import pytest
+from fastapi.testclient import TestClient
 
 from service.app import create_app
+from service.bootstrap import Container
 from service.worker import Worker
 from tests.clients import local_client
 from tests.e2e.simworld import MUG_CENTER, OCCLUDER, WORLD, batch
 
+Api = tuple[TestClient, Worker]  # a client on the app, and the worker the test drives
+
 
 @pytest.fixture
-def api(container):
+def api(container: Container) -> Iterator[Api]:
     """An HTTP client on the app, and a worker the test drives itself."""
     with local_client(create_app(container)) as client:
         yield client, Worker(container)
 
 
-def post(client, worker, scene_id, body):
+def post(client: TestClient, worker: Worker, scene_id: str, body: dict[str, Any]) -> dict[str, Any]:
     response = client.post(f"/v1/scenes/{scene_id}/batches", json=body)
     assert response.status_code == 202, response.text
     worker.drain()
-    status = client.get(f"/v1/scenes/{scene_id}/batches/{body['batch_id']}").json()
+    status: dict[str, Any] = client.get(f"/v1/scenes/{scene_id}/batches/{body['batch_id']}").json()
     assert status["status"] == "done", status
     return status
 
 
-def mug_node(client, scene_id, **params):
+def mug_node(client: TestClient, scene_id: str, **params: str | int) -> dict[str, Any] | None:
     graph = client.get(f"/v1/scenes/{scene_id}/graph", params=params).json()
-    mugs = [node for node in graph["nodes"] if node["label"] == "mug"]
+    mugs: list[dict[str, Any]] = [node for node in graph["nodes"] if node["label"] == "mug"]
     return mugs[0] if mugs else None
 
 
-def published_mug(client, worker):
-    scene_id = client.post("/v1/scenes", json={"name": "kitchen"}).json()["id"]
+def published_mug(client: TestClient, worker: Worker) -> str:
+    scene_id: str = client.post("/v1/scenes", json={"name": "kitchen"}).json()["id"]
     post(client, worker, scene_id, batch("see-0", WORLD, 0))
     assert mug_node(client, scene_id) is None  # one batch is a hypothesis, not published
     post(client, worker, scene_id, batch("see-1", WORLD, 1))
     return scene_id
 
 
-def test_seen_in_two_batches_is_published_within_10cm(api):
+def test_seen_in_two_batches_is_published_within_10cm(api: Api) -> None:
     client, worker = api
     scene_id = published_mug(client, worker)
     node = mug_node(client, scene_id)
-    assert node["state"] == "confirmed"
+    assert node is not None and node["state"] == "confirmed"
     assert np.linalg.norm(np.array(node["center"]) - MUG_CENTER) < 0.1
 
 
-def test_taken_away_in_view_is_removed_and_explained(api):
+def test_taken_away_in_view_is_removed_and_explained(api: Api) -> None:
     client, worker = api
     scene_id = published_mug(client, worker)
-    track_id = mug_node(client, scene_id)["id"]
+    mug = mug_node(client, scene_id)
+    assert mug is not None
+    track_id = mug["id"]
     seq_before_removal = client.get(f"/v1/scenes/{scene_id}").json()["head_seq"]
     empty = WORLD.without("mug")
     removed_after = None
@@ -74,10 +83,13 @@ def test_taken_away_in_view_is_removed_and_explained(api):
 
 
 @pytest.mark.parametrize("hidden", ["occluded", "out_of_view"])
-def test_hidden_or_out_of_view_for_30_batches_stays_published_unchanged(api, hidden):
+def test_hidden_or_out_of_view_for_30_batches_stays_published_unchanged(
+    api: Api, hidden: str
+) -> None:
     client, worker = api
     scene_id = published_mug(client, worker)
     before = mug_node(client, scene_id)
+    assert before is not None
     head = client.get(f"/v1/scenes/{scene_id}").json()["head_seq"]
     world = WORLD.with_occluder(OCCLUDER) if hidden == "occluded" else WORLD
     for i in range(30):
@@ -88,12 +100,12 @@ def test_hidden_or_out_of_view_for_30_batches_stays_published_unchanged(api, hid
             batch(f"{hidden}-{i}", world, 2 + i, look_away=hidden == "out_of_view"),
         )
     after = mug_node(client, scene_id)
-    assert after["id"] == before["id"] and after["state"] == "confirmed"
+    assert after is not None and after["id"] == before["id"] and after["state"] == "confirmed"
     assert after["p_exist"] == before["p_exist"]
     assert client.get(f"/v1/scenes/{scene_id}").json()["head_seq"] == head  # no event at all
 
 
-def test_as_of_beyond_head_is_a_404_problem(api):
+def test_as_of_beyond_head_is_a_404_problem(api: Api) -> None:
     client, worker = api
     scene_id = published_mug(client, worker)
     head = client.get(f"/v1/scenes/{scene_id}").json()["head_seq"]

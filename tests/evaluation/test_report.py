@@ -2,10 +2,22 @@
 
 from __future__ import annotations
 
-from evaluation.report import table, write_report
+from pathlib import Path
+from typing import Any
+
+from evaluation.report import write_report
+from evaluation.tables import table
 
 
-def run(method, idf1, recalled, absent, eligible, scenario="s", latencies=(0, 2, None, 1)):
+def run(
+    method: str,
+    idf1: float,
+    recalled: int,
+    absent: int,
+    eligible: int,
+    scenario: str = "s",
+    latencies: tuple[int | None, ...] = (0, 2, None, 1),
+) -> dict[str, Any]:
     return {
         "scenario": scenario,
         "scenario_file": "s.yaml",
@@ -40,7 +52,7 @@ def run(method, idf1, recalled, absent, eligible, scenario="s", latencies=(0, 2,
     }
 
 
-def test_pooled_columns_and_sample_std(tmp_path):
+def test_pooled_columns_and_sample_std(tmp_path: Path) -> None:
     rows = [run("A", 0.8, 3, 1, 10), run("A", 1.0, 4, 0, 30), run("B", 0.5, 1, 5, 0)]
     text = table("dynamic", rows)
     # A: idf1 mean .9, sample std .141; events 7/8; false absence pooled 1/40 = .025, by
@@ -57,7 +69,9 @@ def test_pooled_columns_and_sample_std(tmp_path):
     assert all(p.stat().st_size > 0 for p in written)
 
 
-def test_the_headline_is_the_hotel_suite_alone_and_shortfalls_carry_their_trace(tmp_path):
+def test_the_headline_is_the_hotel_suite_alone_and_shortfalls_carry_their_trace(
+    tmp_path: Path,
+) -> None:
     rows = [
         run("PBD-AG", 0.9, 3, 2, 10, scenario="hotel-suite"),
         run("PBD-AG", 0.5, 1, 0, 10, scenario="office", latencies=(None, None, 0, 0)),

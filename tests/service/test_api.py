@@ -5,10 +5,14 @@ from __future__ import annotations
 import base64
 import copy
 import json
+from collections.abc import Iterator
+from typing import Any
 
 import pytest
+from fastapi.testclient import TestClient
 
 from service.app import create_app
+from service.bootstrap import Container
 from service.cli import OPENAPI_PATH
 from service.worker import Worker
 from tests.clients import local_client
@@ -16,29 +20,29 @@ from tests.e2e.simworld import WORLD, batch
 
 
 @pytest.fixture
-def client(container):
+def client(container: Container) -> Iterator[TestClient]:
     with local_client(create_app(container)) as test_client:
         yield test_client
 
 
 @pytest.fixture
-def scene_id(client):
-    return client.post("/v1/scenes", json={"name": "hall"}).json()["id"]
+def scene_id(client: TestClient) -> str:
+    return str(client.post("/v1/scenes", json={"name": "hall"}).json()["id"])
 
 
 @pytest.fixture(scope="module")
-def good_batch():
+def good_batch() -> dict[str, Any]:
     return batch("b-0", WORLD, 0)
 
 
-def queue_size(client):
+def queue_size(client: TestClient) -> int:
     return sum(client.get("/healthz").json()["batches"].values())
 
 
-def mutate(body, path, value):
+def mutate(body: dict[str, Any], path: list[str | int], value: object) -> dict[str, Any]:
     """Set a nested key (a list of keys/indices) in a deep copy."""
     changed = copy.deepcopy(body)
-    target = changed
+    target: Any = changed
     for key in path[:-1]:
         target = target[key]
     target[path[-1]] = value
@@ -77,8 +81,14 @@ BAD_INPUTS = [
     ("case", "path", "value", "field"), BAD_INPUTS, ids=[c[0] for c in BAD_INPUTS]
 )
 def test_bad_input_names_the_field_and_changes_nothing(
-    client, scene_id, good_batch, case, path, value, field
-):
+    client: TestClient,
+    scene_id: str,
+    good_batch: dict[str, Any],
+    case: str,
+    path: list[str | int],
+    value: object,
+    field: str,
+) -> None:
     body = mutate(good_batch, path, value)
     response = client.post(f"/v1/scenes/{scene_id}/batches", json=body)
     assert response.status_code == 422, response.text
@@ -90,7 +100,9 @@ def test_bad_input_names_the_field_and_changes_nothing(
     assert queue_size(client) == 0
 
 
-def test_unknown_scene_is_404_and_oversized_body_413(container, client, good_batch):
+def test_unknown_scene_is_404_and_oversized_body_413(
+    container: Container, client: TestClient, good_batch: dict[str, Any]
+) -> None:
     response = client.post("/v1/scenes/scn-missing/batches", json=good_batch)
     assert response.status_code == 404 and response.json()["field"] == "scene_id"
     container.settings.max_body_bytes = 1000
@@ -102,7 +114,7 @@ def test_unknown_scene_is_404_and_oversized_body_413(container, client, good_bat
     assert queue_size(client) == 0
 
 
-def test_bad_scene_params_name_the_field(client):
+def test_bad_scene_params_name_the_field(client: TestClient) -> None:
     response = client.post("/v1/scenes", json={"name": "x", "params": {"lifecycle": {"nope": 1}}})
     assert response.status_code == 422
     assert response.json()["field"] == "params.lifecycle.nope"
@@ -110,8 +122,8 @@ def test_bad_scene_params_name_the_field(client):
 
 
 def test_same_batch_twice_appends_once_and_new_content_conflicts(
-    container, client, scene_id, good_batch
-):
+    container: Container, client: TestClient, scene_id: str, good_batch: dict[str, Any]
+) -> None:
     first = client.post(f"/v1/scenes/{scene_id}/batches", json=good_batch)
     assert first.status_code == 202 and first.json()["status"] == "queued"
     Worker(container).drain()
@@ -127,14 +139,17 @@ def test_same_batch_twice_appends_once_and_new_content_conflicts(
     assert client.get(f"/v1/scenes/{scene_id}").json()["head_seq"] == head
 
 
-def test_events_page_by_cursor_and_tracks_answer_queries(container, client, scene_id):
+def test_events_page_by_cursor_and_tracks_answer_queries(
+    container: Container, client: TestClient, scene_id: str
+) -> None:
     for i in range(3):
         assert (
             client.post(f"/v1/scenes/{scene_id}/batches", json=batch(f"b{i}", WORLD, i)).status_code
             == 202
         )
     Worker(container).drain()
-    seen, after = [], -1
+    seen: list[int] = []
+    after: int | None = -1
     while after is not None:
         page = client.get(
             f"/v1/scenes/{scene_id}/events", params={"after": after, "limit": 2}
@@ -162,6 +177,6 @@ def test_events_page_by_cursor_and_tracks_answer_queries(container, client, scen
     assert any(node["id"] == track_id for node in every["nodes"])
 
 
-def test_openapi_file_matches_the_app(client):
+def test_openapi_file_matches_the_app(client: TestClient) -> None:
     """api_schema/openapi.json is generated from the app (`pbdag openapi`); it must not drift."""
     assert json.loads(OPENAPI_PATH.read_text()) == client.get("/openapi.json").json()

@@ -6,7 +6,9 @@ import hashlib
 import re
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
+import httpx2
 import pytest
 import sqlalchemy as sa
 from fastapi import FastAPI
@@ -58,10 +60,10 @@ def bearer(token: str) -> dict[str, str]:
     return {"Authorization": f"Bearer {token}"}
 
 
-def problem(response, status: int) -> dict:
+def problem(response: httpx2.Response, status: int) -> dict[str, Any]:
     assert response.status_code == status, response.text
     assert response.headers["content-type"] == "application/problem+json"
-    body = response.json()
+    body: dict[str, Any] = response.json()
     assert body["status"] == status
     return body
 
@@ -72,7 +74,9 @@ def lan(container: Container) -> Iterator[TestClient]:
         yield client
 
 
-def test_a_write_without_a_token_is_401_with_a_bearer_challenge(container, lan):
+def test_a_write_without_a_token_is_401_with_a_bearer_challenge(
+    container: Container, lan: TestClient
+) -> None:
     response = lan.post("/v1/scenes", json={"name": "kitchen"})
     body = problem(response, 401)
     assert response.headers["www-authenticate"].startswith("Bearer")
@@ -81,7 +85,9 @@ def test_a_write_without_a_token_is_401_with_a_bearer_challenge(container, lan):
     assert container.log.scenes() == []
 
 
-def test_a_read_token_reads_but_its_write_is_403_naming_the_scope(container, lan):
+def test_a_read_token_reads_but_its_write_is_403_naming_the_scope(
+    container: Container, lan: TestClient
+) -> None:
     token = create_token(container.engine, "viewer", ["read"]).token
     assert lan.get("/v1/scenes", headers=bearer(token)).status_code == 200
     body = problem(lan.post("/v1/scenes", json={"name": "x"}, headers=bearer(token)), 403)
@@ -90,7 +96,7 @@ def test_a_read_token_reads_but_its_write_is_403_naming_the_scope(container, lan
     assert container.log.scenes() == []
 
 
-def test_a_write_token_posts_scenes_and_batches(container, lan):
+def test_a_write_token_posts_scenes_and_batches(container: Container, lan: TestClient) -> None:
     from tests.e2e.simworld import WORLD, batch
 
     token = create_token(container.engine, "robot-1", ["write"]).token
@@ -104,7 +110,7 @@ def test_a_write_token_posts_scenes_and_batches(container, lan):
     assert lan.get(f"/v1/scenes/{scene_id}", headers=bearer(token)).status_code == 200
 
 
-def test_a_revoked_token_is_401(container, lan):
+def test_a_revoked_token_is_401(container: Container, lan: TestClient) -> None:
     new = create_token(container.engine, "robot-1", ["write"])
     assert lan.get("/v1/scenes", headers=bearer(new.token)).status_code == 200
     revoke_token(container.engine, new.record.id)
@@ -122,21 +128,23 @@ def test_a_revoked_token_is_401(container, lan):
         "Bearer pbdag_0123456789ab_" + "A" * 43,  # well formed, never issued
     ],
 )
-def test_malformed_foreign_and_unknown_credentials_are_401(container, lan, authorization):
+def test_malformed_foreign_and_unknown_credentials_are_401(
+    container: Container, lan: TestClient, authorization: str
+) -> None:
     create_token(container.engine, "robot-1", ["write"])
     response = lan.get("/v1/scenes", headers={"Authorization": authorization})
     assert problem(response, 401)["field"] == "authorization"
     assert response.headers["www-authenticate"].startswith("Bearer")
 
 
-def test_a_token_with_its_secret_altered_is_401(container, lan):
+def test_a_token_with_its_secret_altered_is_401(container: Container, lan: TestClient) -> None:
     token = create_token(container.engine, "robot-1", ["write"]).token
     altered = token[:-1] + ("A" if token[-1] != "A" else "B")
     problem(lan.get("/v1/scenes", headers=bearer(altered)), 401)
     assert lan.get("/v1/scenes", headers=bearer(token)).status_code == 200
 
 
-def test_admin_routes_need_the_admin_scope(container, lan):
+def test_admin_routes_need_the_admin_scope(container: Container, lan: TestClient) -> None:
     writer = create_token(container.engine, "robot-1", ["write"]).token
     body = problem(lan.get("/v1/admin/whoami", headers=bearer(writer)), 403)
     assert "'admin' scope" in body["detail"] and body["field"] == "authorization"
@@ -149,14 +157,14 @@ def test_admin_routes_need_the_admin_scope(container, lan):
     )
 
 
-def test_scopes_nest_admin_write_read():
+def test_scopes_nest_admin_write_read() -> None:
     assert effective_scopes(["read"]) == {"read"}
     assert effective_scopes(["write"]) == {"read", "write"}
     assert effective_scopes(["admin"]) == {"read", "write", "admin"}
     assert "admin" not in ANONYMOUS_LOCAL_SCOPES and "write" in ANONYMOUS_LOCAL_SCOPES
 
 
-def test_tokens_are_stored_as_sha256_only(container):
+def test_tokens_are_stored_as_sha256_only(container: Container) -> None:
     new = create_token(container.engine, "robot-1", ["read", "write"])
     assert TOKEN_PATTERN.fullmatch(new.token)
     assert new.token.startswith(f"pbdag_{new.record.id}_")
@@ -174,7 +182,7 @@ def test_tokens_are_stored_as_sha256_only(container):
     assert [record.id for record in list_tokens(container.engine)] == [new.record.id]
 
 
-def test_token_creation_rejects_unknown_or_no_scopes_and_empty_names(container):
+def test_token_creation_rejects_unknown_or_no_scopes_and_empty_names(container: Container) -> None:
     with pytest.raises(ValueError, match="unknown scopes"):
         create_token(container.engine, "x", ["root"])
     with pytest.raises(ValueError, match="at least one scope"):
@@ -184,7 +192,7 @@ def test_token_creation_rejects_unknown_or_no_scopes_and_empty_names(container):
     assert list_tokens(container.engine) == []
 
 
-def test_healthz_stays_open_and_docs_need_read(container, lan):
+def test_healthz_stays_open_and_docs_need_read(container: Container, lan: TestClient) -> None:
     assert lan.get("/healthz").status_code == 200
     for path in ("/openapi.json", "/docs", "/redoc"):
         problem(lan.get(path), 401)
@@ -197,14 +205,14 @@ def test_healthz_stays_open_and_docs_need_read(container, lan):
     assert document["paths"]["/healthz"]["get"]["security"] == []
 
 
-def test_unknown_paths_need_a_token_too(lan):
+def test_unknown_paths_need_a_token_too(lan: TestClient) -> None:
     problem(lan.get("/v1/no/such/route"), 401)
 
 
 # --- anonymous local access --------------------------------------------------------------------
 
 
-def test_loopback_needs_a_token_unless_anonymous_local_access_is_on(container):
+def test_loopback_needs_a_token_unless_anonymous_local_access_is_on(container: Container) -> None:
     with local_client(make_app(container)) as local:
         problem(local.post("/v1/scenes", json={"name": "x"}), 401)
     with local_client(make_app(container, allow_anonymous_local=True)) as local:
@@ -215,7 +223,7 @@ def test_loopback_needs_a_token_unless_anonymous_local_access_is_on(container):
         problem(local.get("/v1/scenes", headers=bearer("pbdag_0123456789ab_" + "A" * 43)), 401)
 
 
-def test_anonymous_local_access_never_extends_to_other_addresses(container):
+def test_anonymous_local_access_never_extends_to_other_addresses(container: Container) -> None:
     app = make_app(container, allow_anonymous_local=True)
     with lan_client(app) as lan:
         problem(lan.post("/v1/scenes", json={"name": "x"}), 401)
@@ -225,7 +233,8 @@ def test_anonymous_local_access_never_extends_to_other_addresses(container):
     assert [scene.name for scene in container.log.scenes()] == []
 
 
-def test_loopback_addresses():
+def test_loopback_addresses() -> None:
+    host: str | None
     for host in ("127.0.0.1", "127.8.9.10", "::1", "[::1]", "::ffff:127.0.0.1", "localhost"):
         assert is_loopback(host), host
     for host in ("192.168.1.50", "10.0.0.1", "0.0.0.0", "::", "testclient", "", None):
@@ -235,7 +244,7 @@ def test_loopback_addresses():
 # --- allowed hosts and CORS --------------------------------------------------------------------
 
 
-def test_a_foreign_host_header_is_rejected_before_anything_else(container):
+def test_a_foreign_host_header_is_rejected_before_anything_else(container: Container) -> None:
     app = make_app(container, allow_anonymous_local=True)
     with local_client(app, base_url="http://attacker.example") as client:
         response = client.get("/healthz")
@@ -249,15 +258,15 @@ def test_a_foreign_host_header_is_rejected_before_anything_else(container):
     assert container.log.scenes() == []
 
 
-def test_allowed_host_patterns():
-    hosts = AllowedHosts(lambda *_: None, ["robot.lan", "*.fleet.example", "[fd00::7]"])  # type: ignore[arg-type,return-value]
+def test_allowed_host_patterns() -> None:
+    hosts = AllowedHosts(FastAPI(), ["robot.lan", "*.fleet.example", "[fd00::7]"])
     assert hosts.allows("robot.lan:8000") and hosts.allows("ROBOT.LAN")
     assert hosts.allows("r1.fleet.example") and not hosts.allows("fleet.example.evil")
     assert hosts.allows("[fd00::7]:8000") and not hosts.allows("[fd00::8]:8000")
     assert not hosts.allows("") and not hosts.allows("evil.lan")
 
 
-def test_serving_on_a_lan_address_allows_that_host_but_not_a_wildcard():
+def test_serving_on_a_lan_address_allows_that_host_but_not_a_wildcard() -> None:
     default = ["localhost", "127.0.0.1", "::1"]
     assert hosts_when_serving(default, "192.168.1.20") == [*default, "192.168.1.20"]
     assert hosts_when_serving(default, "0.0.0.0") == default
@@ -265,7 +274,7 @@ def test_serving_on_a_lan_address_allows_that_host_but_not_a_wildcard():
     assert hosts_when_serving(default, "127.0.0.1") == default
 
 
-def test_cors_is_off_by_default_and_allows_configured_origins(container):
+def test_cors_is_off_by_default_and_allows_configured_origins(container: Container) -> None:
     preflight = {
         "Origin": "http://viewer.lan",
         "Access-Control-Request-Method": "GET",
@@ -288,7 +297,7 @@ def test_cors_is_off_by_default_and_allows_configured_origins(container):
 # --- rate limits -------------------------------------------------------------------------------
 
 
-def test_rate_limit_is_per_token_and_answers_429_with_retry_after(container):
+def test_rate_limit_is_per_token_and_answers_429_with_retry_after(container: Container) -> None:
     app = make_app(container, rate_limit_per_minute=60, rate_limit_burst=2)
     first = create_token(container.engine, "robot-1", ["read"]).token
     second = create_token(container.engine, "robot-2", ["read"]).token
@@ -305,7 +314,7 @@ def test_rate_limit_is_per_token_and_answers_429_with_retry_after(container):
         assert client.get("/healthz").status_code == 200  # probes are never limited
 
 
-def test_anonymous_and_failed_requests_are_limited_per_address(container):
+def test_anonymous_and_failed_requests_are_limited_per_address(container: Container) -> None:
     app = make_app(container, rate_limit_per_minute=60, rate_limit_burst=2)
     with lan_client(app) as client:
         assert [client.get("/v1/scenes").status_code for _ in range(3)] == [401, 401, 429]
@@ -316,13 +325,13 @@ def test_anonymous_and_failed_requests_are_limited_per_address(container):
         assert [client.get("/v1/scenes").status_code for _ in range(3)] == [200, 200, 429]
 
 
-def test_rate_limit_zero_turns_it_off(container):
+def test_rate_limit_zero_turns_it_off(container: Container) -> None:
     app = make_app(container, allow_anonymous_local=True, rate_limit_per_minute=0)
     with local_client(app) as client:
         assert {client.get("/v1/scenes").status_code for _ in range(300)} == {200}
 
 
-def test_token_bucket_refills_at_the_configured_rate():
+def test_token_bucket_refills_at_the_configured_rate() -> None:
     now = [0.0]
     limiter = RateLimiter(per_minute=120, burst=3, clock=lambda: now[0])  # 2 per second
     assert [limiter.acquire("a") for _ in range(3)] == [0.0, 0.0, 0.0]
@@ -335,7 +344,7 @@ def test_token_bucket_refills_at_the_configured_rate():
     assert [limiter.acquire("a") for _ in range(4)][-1] > 0
 
 
-def test_the_principal_of_a_scoped_route_needs_access_control_in_front():
+def test_the_principal_of_a_scoped_route_needs_access_control_in_front() -> None:
     from fastapi import Depends
 
     from service.auth import require_scope
@@ -352,7 +361,7 @@ def test_the_principal_of_a_scoped_route_needs_access_control_in_front():
         assert client.get("/admin").status_code == 401
 
 
-def test_principal_descriptions_name_the_token():
+def test_principal_descriptions_name_the_token() -> None:
     token = Principal("token", frozenset({"read"}), "token:abc", token_id="abc", name="robot")
     assert token.describe() == "token abc (robot)"
     assert Principal("anonymous-local", ANONYMOUS_LOCAL_SCOPES, "address:127.0.0.1").describe()
@@ -361,7 +370,7 @@ def test_principal_descriptions_name_the_token():
 # --- settings ----------------------------------------------------------------------------------
 
 
-def test_security_settings_from_the_environment(monkeypatch):
+def test_security_settings_from_the_environment(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("PBDAG_ALLOWED_HOSTS", "robot.lan, 192.168.1.20")
     monkeypatch.setenv("PBDAG_CORS_ORIGINS", '["http://viewer.lan"]')
     monkeypatch.setenv("PBDAG_ALLOW_ANONYMOUS_LOCAL", "true")
@@ -373,7 +382,7 @@ def test_security_settings_from_the_environment(monkeypatch):
     assert settings.rate_limit_per_minute == 600
 
 
-def test_secure_defaults(monkeypatch):
+def test_secure_defaults(monkeypatch: pytest.MonkeyPatch) -> None:
     for name in ("ALLOWED_HOSTS", "CORS_ORIGINS", "ALLOW_ANONYMOUS_LOCAL", "RATE_LIMIT_PER_MINUTE"):
         monkeypatch.delenv(f"PBDAG_{name}", raising=False)
     settings = Settings()
@@ -383,22 +392,24 @@ def test_secure_defaults(monkeypatch):
     assert settings.rate_limit_per_minute == 1200
 
 
-def test_secret_files_set_the_database_url_and_password(tmp_path: Path, monkeypatch):
+def test_secret_files_set_the_database_url_and_password(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     monkeypatch.delenv("PBDAG_DATABASE_URL", raising=False)
     monkeypatch.delenv("PBDAG_DATABASE_PASSWORD", raising=False)
     (tmp_path / "pbdag_database_url").write_text("postgresql+psycopg://pbdag@db:5432/pbdag\n")
     (tmp_path / "pbdag_database_password").write_text("s3cr@t/pw\n")
-    settings = Settings(_secrets_dir=tmp_path)  # type: ignore[call-arg]
+    settings = Settings(_secrets_dir=tmp_path)
     url = sa.make_url(settings.resolved_database_url())
     assert (url.host, url.username, url.password) == ("db", "pbdag", "s3cr@t/pw")
     assert "s3cr@t" not in repr(settings)
     # the environment wins over a secret file
     monkeypatch.setenv("PBDAG_DATABASE_URL", "postgresql+psycopg://other:given@db/x")
-    url = sa.make_url(Settings(_secrets_dir=tmp_path).resolved_database_url())  # type: ignore[call-arg]
+    url = sa.make_url(Settings(_secrets_dir=tmp_path).resolved_database_url())
     assert (url.username, url.password) == ("other", "given")
 
 
-def test_a_missing_secrets_directory_is_no_warning(tmp_path: Path):
+def test_a_missing_secrets_directory_is_no_warning(tmp_path: Path) -> None:
     # pytest turns warnings into errors: this fails if pydantic-settings warns.
-    settings = Settings(_secrets_dir=tmp_path / "absent")  # type: ignore[call-arg]
+    settings = Settings(_secrets_dir=tmp_path / "absent")
     assert settings.database_password is None

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import pytest
 import sqlalchemy as sa
 
 from service.app import create_app
@@ -14,8 +17,8 @@ from tests.e2e.simworld import WORLD, batch
 
 
 def test_worker_drain_then_rebuild_reports_no_difference_then_a_tampered_row(
-    tmp_path, monkeypatch, capsys
-):
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
     monkeypatch.setenv("PBDAG_DATA_DIR", str(tmp_path))
     monkeypatch.delenv("PBDAG_DATABASE_URL", raising=False)
     container = build_container(Settings(snapshot_interval=5, allow_anonymous_local=True))

@@ -354,19 +354,22 @@ def with_pose(pose: list[list[float]]) -> dict[str, Any]:
 def scaled_rotation() -> list[list[float]]:
     pose = np.array(sample_pose())
     pose[:3, :3] *= 1.01
-    return pose.tolist()
+    rows: list[list[float]] = pose.tolist()
+    return rows
 
 
 def reflection() -> list[list[float]]:
     pose = np.array(sample_pose())
     pose[:3, 2] *= -1
-    return pose.tolist()
+    rows: list[list[float]] = pose.tolist()
+    return rows
 
 
 def projective_last_row() -> list[list[float]]:
     pose = np.array(sample_pose())
     pose[3] = [0.0, 0.0, 0.01, 1.0]
-    return pose.tolist()
+    rows: list[list[float]] = pose.tolist()
+    return rows
 
 
 @pytest.mark.parametrize(

@@ -13,13 +13,12 @@ from fastapi import FastAPI, Request
 from starlette.types import Message
 
 from api_schema import BatchIn
-from core.errors import PbdagError, StateConflict, UnknownTrack, field_path
+from core.errors import NotFound, PbdagError, StateConflict, UnknownTrack, field_path
 from service.codec import decode_batch
 from service.errors import (
     INTERNAL,
     PROBLEM_MEDIA_TYPE,
     PROBLEMS,
-    NotFound,
     install_problem_handlers,
     problem_of,
 )

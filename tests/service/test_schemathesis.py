@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import schemathesis
 from hypothesis import HealthCheck, settings
@@ -25,6 +26,9 @@ from service.bootstrap import build_container
 from service.commands import create_scene
 from service.settings import Settings
 from service.store.engine import make_engine
+
+if TYPE_CHECKING:
+    from schemathesis.specs.openapi.schemas import OpenApiCase
 
 EXAMPLES = int(os.environ.get("PBDAG_FUZZ_EXAMPLES", "15"))
 DATA = Path(os.environ.get("PBDAG_FUZZ_DIR", "/tmp")) / f"pbdag-schemathesis-{os.getpid()}"
@@ -56,7 +60,7 @@ CHECKS = [
     suppress_health_check=list(HealthCheck),
     derandomize=True,
 )
-def test_no_server_error_and_every_answer_as_documented(case: schemathesis.Case) -> None:
+def test_no_server_error_and_every_answer_as_documented(case: OpenApiCase) -> None:
     if case.path_parameters and "scene_id" in case.path_parameters:
         case.path_parameters["scene_id"] = SCENE.id  # past the 404 of an unknown scene
     case.call_and_validate(headers={"Authorization": f"Bearer {TOKEN}"}, checks=CHECKS)

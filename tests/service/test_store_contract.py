@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
 
 import pytest
 import sqlalchemy as sa
 
-from core.events import ObjectAdded, Observation, VisibleMiss
+from core.events import Event, ObjectAdded, Observation, VisibleMiss
 from core.params import Params
 from core.state import SceneState
+from service.bootstrap import Container
 from service.commands import create_scene, run_command
 from service.settings import Settings
 from service.store.engine import make_engine
@@ -20,8 +23,16 @@ from service.store.errors import (
     SceneNotFound,
     SeqOutOfRange,
 )
+from service.store.event_log import SceneRecord
 from service.store.projection import rebuild_scene
-from service.store.queue import Admission, NotRequeueable, QueueFull, QuotaExceeded
+from service.store.queue import (
+    Admission,
+    BatchRecord,
+    Claim,
+    NotRequeueable,
+    QueueFull,
+    QuotaExceeded,
+)
 from service.store.tables import tracks
 
 
@@ -67,24 +78,26 @@ def missed(track_id: str, logodds: float, misses: int) -> VisibleMiss:
 
 
 @pytest.fixture
-def settings(tmp_path):
+def settings(tmp_path: Path) -> Settings:
     """A snapshot after every append, so that as_of reads exercise snapshot + tail."""
     return Settings(data_dir=tmp_path / "data", snapshot_interval=1, lease_seconds=30.0)
 
 
-def new_scene(container, name="s", params=None):
+def new_scene(container: Container, name: str = "s", params: Params | None = None) -> SceneRecord:
     """A scene through the one write path."""
     return create_scene(container, name, params or Params())
 
 
-def append_batch(container, scene_id, events, batch_id=None):
+def append_batch(
+    container: Container, scene_id: str, events: Sequence[Event], batch_id: str | None = None
+) -> tuple[int, int] | None:
     """Append at the current head through the one write path, as the worker does."""
     state = container.log.load_state(scene_id)
     with container.uow.begin() as work:
         return work.append(scene_id, state, events, batch_id=batch_id).seqs
 
 
-def test_scene_starts_at_seq_zero_with_its_params_in_the_log(container):
+def test_scene_starts_at_seq_zero_with_its_params_in_the_log(container: Container) -> None:
     params = Params.from_dict({"lifecycle": {"move_min_distance_m": 0.5}})
     scene = new_scene(container, "kitchen", params)
     assert scene.head_seq == 0
@@ -96,7 +109,7 @@ def test_scene_starts_at_seq_zero_with_its_params_in_the_log(container):
         container.log.scene("scn-nope")
 
 
-def test_append_is_gapless_and_conflicts_on_a_stale_head(container):
+def test_append_is_gapless_and_conflicts_on_a_stale_head(container: Container) -> None:
     scene = new_scene(container)
     assert append_batch(container, scene.id, [added("trk-000001"), added("trk-000002", 1.0)]) == (
         1,
@@ -110,7 +123,7 @@ def test_append_is_gapless_and_conflicts_on_a_stale_head(container):
     assert [e.seq for e in container.log.read(scene.id)] == [0, 1, 2, 3]
 
 
-def test_rollback_leaves_no_gap_and_no_rows(container):
+def test_rollback_leaves_no_gap_and_no_rows(container: Container) -> None:
     scene = new_scene(container)
     state = container.log.load_state(scene.id)
     with pytest.raises(RuntimeError), container.uow.begin() as work:
@@ -120,7 +133,7 @@ def test_rollback_leaves_no_gap_and_no_rows(container):
     assert append_batch(container, scene.id, [added("trk-000001")]) == (1, 1)
 
 
-def test_read_filters_and_pages(container):
+def test_read_filters_and_pages(container: Container) -> None:
     scene = new_scene(container)
     append_batch(container, scene.id, [added(f"trk-{i:06d}", float(i)) for i in range(1, 8)])
     page = container.log.read(scene.id, after=2, limit=3)
@@ -129,7 +142,7 @@ def test_read_filters_and_pages(container):
     assert len(container.log.read(scene.id, event_type="add")) == 7
 
 
-def test_as_of_snapshot_plus_tail_equals_replay_and_is_stable(container):
+def test_as_of_snapshot_plus_tail_equals_replay_and_is_stable(container: Container) -> None:
     scene = new_scene(container)
     append_batch(container, scene.id, [added("trk-000001"), added("trk-000002", 2.0)])
     before = container.log.load_state(scene.id, as_of=2).to_dict()
@@ -145,7 +158,7 @@ def test_as_of_snapshot_plus_tail_equals_replay_and_is_stable(container):
         container.log.load_state(scene.id, as_of=6)
 
 
-def test_snapshot_in_another_format_is_ignored(container):
+def test_snapshot_in_another_format_is_ignored(container: Container) -> None:
     scene = new_scene(container)
     append_batch(container, scene.id, [added("trk-000001")])
     with container.engine.begin() as connection:
@@ -153,7 +166,9 @@ def test_snapshot_in_another_format_is_ignored(container):
     assert container.log.load_state(scene.id).to_dict() == container.log.replay(scene.id).to_dict()
 
 
-def test_rebuild_reports_no_difference_then_detects_a_tampered_projection(container):
+def test_rebuild_reports_no_difference_then_detects_a_tampered_projection(
+    container: Container,
+) -> None:
     scene = new_scene(container)
     append_batch(container, scene.id, [added("trk-000001"), added("trk-000002", 2.0)])
     append_batch(container, scene.id, [missed("trk-000001", 0.3, 1)])
@@ -172,10 +187,30 @@ BOUNDS = Admission(max_queued=100, max_blob_bytes=10**9, retry_after_seconds=2)
 
 
 class TestQueue:
-    def submit(self, container, scene_id, batch_id, sha="a" * 64, size=100, bounds=BOUNDS):
+    def submit(
+        self,
+        container: Container,
+        scene_id: str,
+        batch_id: str,
+        sha: str = "a" * 64,
+        size: int = 100,
+        bounds: Admission = BOUNDS,
+    ) -> tuple[BatchRecord, bool]:
         return container.queue.submit(scene_id, batch_id, sha, "blob-" + batch_id, 1, size, bounds)
 
-    def test_submit_is_idempotent_and_conflicts_on_new_content(self, container):
+    def claim(self, container: Container, owner: str, lease_seconds: float) -> Claim:
+        """The lease the test expects the queue to hand out."""
+        claim = container.queue.claim(owner, lease_seconds)
+        assert claim is not None
+        return claim
+
+    def record(self, container: Container, scene_id: str, batch_id: str) -> BatchRecord:
+        """The queued batch's record, which the test expects to exist."""
+        record = container.queue.get(scene_id, batch_id)
+        assert record is not None
+        return record
+
+    def test_submit_is_idempotent_and_conflicts_on_new_content(self, container: Container) -> None:
         scene = new_scene(container)
         first, created = self.submit(container, scene.id, "b1")
         again, created_again = self.submit(container, scene.id, "b1")
@@ -183,7 +218,7 @@ class TestQueue:
         with pytest.raises(BatchConflict):
             self.submit(container, scene.id, "b1", sha="b" * 64)
 
-    def test_concurrent_posts_of_one_batch_store_it_once(self, container):
+    def test_concurrent_posts_of_one_batch_store_it_once(self, container: Container) -> None:
         """Six posts racing: one row, every caller gets it (PostgreSQL's UniqueViolation)."""
         scene = new_scene(container)
         with ThreadPoolExecutor(6) as pool:
@@ -191,7 +226,9 @@ class TestQueue:
         assert len({record.id for record, _created in results}) == 1
         assert sum(created for _record, created in results) == 1
 
-    def test_a_full_queue_and_a_full_quota_refuse_new_batches_only(self, container):
+    def test_a_full_queue_and_a_full_quota_refuse_new_batches_only(
+        self, container: Container
+    ) -> None:
         scene = new_scene(container)
         bounds = Admission(max_queued=2, max_blob_bytes=250, retry_after_seconds=3)
         self.submit(container, scene.id, "b1", bounds=bounds)
@@ -200,31 +237,33 @@ class TestQueue:
             self.submit(container, scene.id, "b3", bounds=bounds)
         assert full.value.headers == {"Retry-After": "3"}
         assert self.submit(container, scene.id, "b2", bounds=bounds)[1] is False  # a re-post
-        claim = container.queue.claim("w", 30)
+        claim = self.claim(container, "w", 30)
         with container.uow.begin() as work:
             work.complete(claim, None)
         with pytest.raises(QuotaExceeded):  # 200 bytes stored, 100 more exceed 250
             self.submit(container, scene.id, "b3", bounds=bounds)
         assert container.queue.counts(scene.id) == {"done": 1, "queued": 1}
 
-    def test_batches_of_one_scene_are_claimed_in_arrival_order_one_at_a_time(self, container):
+    def test_batches_of_one_scene_are_claimed_in_arrival_order_one_at_a_time(
+        self, container: Container
+    ) -> None:
         one = new_scene(container, "one")
         two = new_scene(container, "two")
         for batch_id in ("a1", "a2"):
             self.submit(container, one.id, batch_id)
         self.submit(container, two.id, "b1")
-        first = container.queue.claim("w1", 30)
-        second = container.queue.claim("w2", 30)
+        first = self.claim(container, "w1", 30)
+        second = self.claim(container, "w2", 30)
         assert (first.batch_id, second.batch_id) == ("a1", "b1")
         assert container.queue.claim("w3", 30) is None  # a2 waits for a1
         with container.uow.begin() as work:
             work.complete(first, None)
-        assert container.queue.claim("w3", 30).batch_id == "a2"
+        assert self.claim(container, "w3", 30).batch_id == "a2"
 
-    def test_completion_is_fenced_by_the_lease(self, container):
+    def test_completion_is_fenced_by_the_lease(self, container: Container) -> None:
         scene = new_scene(container)
         self.submit(container, scene.id, "b1")
-        claim = container.queue.claim("w1", 30)
+        claim = self.claim(container, "w1", 30)
         stolen = type(claim)(
             claim.id, claim.scene_id, claim.batch_id, claim.blob_key, "intruder", 1
         )
@@ -233,28 +272,30 @@ class TestQueue:
             appended = work.append(scene.id, state, [added("trk-000001")], batch_id="b1")
             work.complete(stolen, appended.seqs)
         assert container.log.scene(scene.id).head_seq == 0  # the append rolled back with it
-        assert container.queue.get(scene.id, "b1").status == "running"
+        assert self.record(container, scene.id, "b1").status == "running"
         assert not container.queue.renew(stolen, 30) and container.queue.renew(claim, 30)
 
-    def test_a_failed_attempt_waits_for_its_retry(self, container):
+    def test_a_failed_attempt_waits_for_its_retry(self, container: Container) -> None:
         now = [1000.0]
         container.queue.clock = lambda: now[0]
         scene = new_scene(container)
         self.submit(container, scene.id, "b1")
-        claim = container.queue.claim("w", 30)
+        claim = self.claim(container, "w", 30)
         container.queue.retry_later(claim, "OperationalError: will retry", 4.0)
-        record = container.queue.get(scene.id, "b1")
+        record = self.record(container, scene.id, "b1")
         assert (record.status, record.not_before) == ("failed", 1004.0)
         assert container.queue.claim("w", 30) is None  # not yet due
         now[0] = 1004.5
-        assert container.queue.claim("w", 30).attempts == 2
+        assert self.claim(container, "w", 30).attempts == 2
 
-    def test_a_renewed_lease_does_not_expire_and_an_abandoned_one_does(self, container):
+    def test_a_renewed_lease_does_not_expire_and_an_abandoned_one_does(
+        self, container: Container
+    ) -> None:
         now = [1000.0]
         container.queue.clock = lambda: now[0]
         scene = new_scene(container)
         self.submit(container, scene.id, "b1")
-        claim = container.queue.claim("w", 10)
+        claim = self.claim(container, "w", 10)
         now[0] = 1008.0
         assert container.queue.renew(claim, 10)
         now[0] = 1015.0  # past the first lease, inside the renewed one
@@ -262,11 +303,13 @@ class TestQueue:
         now[0] = 1019.0
         assert [c.batch_id for c in container.queue.expired()] == ["b1"]
 
-    def test_a_dead_batch_is_recorded_in_the_log_and_can_be_requeued(self, container):
+    def test_a_dead_batch_is_recorded_in_the_log_and_can_be_requeued(
+        self, container: Container
+    ) -> None:
         scene = new_scene(container)
         self.submit(container, scene.id, "b1")
         self.submit(container, scene.id, "b2")
-        claim = container.queue.claim("w", 30)
+        claim = self.claim(container, "w", 30)
         state = container.log.load_state(scene.id)
         with container.uow.begin() as work:
             work.skip(claim, state, "rejected: frames[0].depth: not a PNG")
@@ -275,22 +318,24 @@ class TestQueue:
             "b1",
             "rejected: frames[0].depth: not a PNG",
         )
-        record = container.queue.get(scene.id, "b1")
+        record = self.record(container, scene.id, "b1")
         assert record.status == "dead" and record.error == "rejected: frames[0].depth: not a PNG"
-        assert container.queue.claim("w", 30).batch_id == "b2"  # the scene moved on
+        assert self.claim(container, "w", 30).batch_id == "b2"  # the scene moved on
         with pytest.raises(NotRequeueable):
             container.queue.requeue(scene.id, "b2")  # running, not dead
         requeued = container.queue.requeue(scene.id, "b1")
         assert (requeued.status, requeued.attempts, requeued.error) == ("queued", 0, None)
 
 
-def test_initial_state_is_empty(container):
+def test_initial_state_is_empty(container: Container) -> None:
     scene = new_scene(container)
     state = container.log.load_state(scene.id)
     assert state.head_seq == 0 and state.tracks == {} and isinstance(state, SceneState)
 
 
-def test_concurrent_migrations_are_serialized(backend, tmp_path, request):
+def test_concurrent_migrations_are_serialized(
+    backend: str, tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
     """API and workers all run `pbdag migrate` work at startup; on a fresh database they must not race."""
     import os
     import subprocess
@@ -321,12 +366,12 @@ def test_concurrent_migrations_are_serialized(backend, tmp_path, request):
         engine.dispose()
 
 
-def test_a_command_is_decided_again_when_the_head_moved(container):
+def test_a_command_is_decided_again_when_the_head_moved(container: Container) -> None:
     """Verdicts and freezes race with the worker: the expected-head append retries on a new head."""
     scene = new_scene(container)
-    calls = []
+    calls: list[int] = []
 
-    def decide_command(state):
+    def decide_command(state: SceneState) -> list[Event]:
         calls.append(state.head_seq)
         if len(calls) == 1:  # somebody appends between our read and our append
             append_batch(container, scene.id, [added("trk-000001")])

@@ -25,14 +25,14 @@ TOKEN_LINE = re.compile(r"^pbdag_([0-9a-f]{12})_[A-Za-z0-9_-]{43}$")
 
 
 @pytest.fixture
-def data_dir(tmp_path, monkeypatch) -> Path:
+def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     """`pbdag` commands in this test use a fresh SQLite database under a temp dir."""
     monkeypatch.setenv("PBDAG_DATA_DIR", str(tmp_path))
     monkeypatch.delenv("PBDAG_DATABASE_URL", raising=False)
     return tmp_path
 
 
-def test_create_list_revoke_round_trip(data_dir, capsys):
+def test_create_list_revoke_round_trip(data_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert (
         main(["token", "create", "--name", "robot-1", "--scope", "read", "--scope", "write"]) == 0
     )
@@ -66,7 +66,7 @@ def test_create_list_revoke_round_trip(data_dir, capsys):
     assert "no token" in capsys.readouterr().err
 
 
-def test_create_needs_a_known_scope(data_dir, capsys):
+def test_create_needs_a_known_scope(data_dir: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["token", "create", "--name", "x", "--scope", "root"]) == 2
     assert "unknown scopes" in capsys.readouterr().err
     with pytest.raises(SystemExit):
@@ -76,7 +76,9 @@ def test_create_needs_a_known_scope(data_dir, capsys):
         assert connection.execute(sa.select(sa.func.count()).select_from(api_tokens)).scalar() == 0
 
 
-def test_list_without_tokens_says_how_to_create_one(data_dir, capsys):
+def test_list_without_tokens_says_how_to_create_one(
+    data_dir: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     assert main(["token", "list"]) == 0
     assert "pbdag token create" in capsys.readouterr().out
 
@@ -87,7 +89,7 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-def test_serve_on_the_lan_without_a_token_exits_with_instructions(tmp_path):
+def test_serve_on_the_lan_without_a_token_exits_with_instructions(tmp_path: Path) -> None:
     env = {**os.environ, "PBDAG_DATA_DIR": str(tmp_path)}
     env.pop("PBDAG_DATABASE_URL", None)
     port = free_port()
@@ -106,7 +108,7 @@ def test_serve_on_the_lan_without_a_token_exits_with_instructions(tmp_path):
     assert "API on" not in done.stdout  # it stopped before starting the server
 
 
-def test_serve_refusal_decides_by_loopback_and_active_tokens(tmp_path):
+def test_serve_refusal_decides_by_loopback_and_active_tokens(tmp_path: Path) -> None:
     engine = build_container(Settings(data_dir=tmp_path)).engine
     for host in ("127.0.0.1", "localhost", "::1"):
         assert serve_refusal(host, engine) is None, host
@@ -118,7 +120,7 @@ def test_serve_refusal_decides_by_loopback_and_active_tokens(tmp_path):
     assert serve_refusal("0.0.0.0", engine) is not None  # only active tokens count
 
 
-def test_serve_says_when_nobody_could_use_the_api(tmp_path):
+def test_serve_says_when_nobody_could_use_the_api(tmp_path: Path) -> None:
     engine = build_container(Settings(data_dir=tmp_path)).engine
     assert "every request but /healthz will get a 401" in access_summary(engine, False)
     assert "401" not in access_summary(engine, True)

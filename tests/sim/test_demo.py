@@ -73,7 +73,7 @@ def test_only_the_desk_is_ambiguous(demo: Scenario) -> None:
     ambiguity = demo.detector.fixtures.ambiguity
     assert ambiguity is not None and set(ambiguity) == {"desk"}
     desk_scores = ambiguity["desk"]
-    ranked = sorted(desk_scores, key=desk_scores.get, reverse=True)
+    ranked = sorted(desk_scores, key=desk_scores.__getitem__, reverse=True)
     assert ranked[:2] == ["desk", "table"]
     assert 0 < desk_scores["desk"] - desk_scores["table"] <= 0.05
 

@@ -10,7 +10,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 
 
-def test_demo_runs_to_its_summary_and_freezes_a_baseline(tmp_path):
+def test_demo_runs_to_its_summary_and_freezes_a_baseline(tmp_path: Path) -> None:
     env = {**os.environ, "PBDAG_DATA_DIR": str(tmp_path / "data")}
     env.pop("PBDAG_DATABASE_URL", None)
     done = subprocess.run(

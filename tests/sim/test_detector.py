@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from sim.camera import CameraModel
@@ -16,6 +18,7 @@ from sim.detector import (
 )
 from sim.render import Render
 from sim.world import Box, World
+from tests.expect import present
 
 CAMERA = CameraModel(width=80, height=60)
 WORLD = World(
@@ -69,7 +72,7 @@ def test_recall_keeps_about_that_fraction() -> None:
 def test_same_seed_gives_same_detections() -> None:
     def run(seed: int) -> list[tuple[str, float]]:
         found = detect(VIEW, WORLD, np.random.default_rng(seed), recall=0.5, embedding_noise=0.1)
-        return [(d.object_id, float(d.embedding[0])) for d in found]
+        return [(d.object_id, float(present(d.embedding)[0])) for d in found]
 
     assert run(9) == run(9)
 
@@ -96,8 +99,10 @@ def test_object_embedding_is_stable_unit_and_distinct() -> None:
 def test_detector_embedding_is_noisy_and_not_renormalised() -> None:
     rng = np.random.default_rng(1)
     (clean,) = detect(VIEW, WORLD, rng)
+    assert clean.embedding is not None
     assert np.array_equal(clean.embedding, object_embedding("mug"))
     (noisy,) = detect(VIEW, WORLD, rng, embedding_noise=0.05)
+    assert noisy.embedding is not None
     difference = noisy.embedding - object_embedding("mug")
     assert 0.03 < float(np.std(difference)) < 0.07
     assert abs(np.linalg.norm(noisy.embedding) - 1.0) > 1e-6
@@ -181,6 +186,7 @@ def test_ambiguity_overrides_the_scores_of_one_fixture() -> None:
     )
     assert table.class_scores == fixture_class_scores(FIXTURE_WORLD.fixtures[0])
     assert (desk.label, desk.score) == ("desk", 0.51)
+    assert desk.class_scores is not None
     assert list(desk.class_scores.items())[:2] == [("desk", 0.51), ("table", 0.49)]
     (_, flipped) = detect_fixtures(
         FIXTURE_VIEW,
@@ -210,7 +216,7 @@ def test_fixture_scores_are_clipped_to_the_unit_interval() -> None:
         score
         for _ in range(20)
         for detection in detect_fixtures(FIXTURE_VIEW, FIXTURE_WORLD, rng, score_noise=1.0)
-        for score in detection.class_scores.values()
+        for score in present(detection.class_scores).values()
     ]
     assert min(values) == 0.0 and max(values) == 1.0
     assert all(0.0 <= value <= 1.0 for value in values)
@@ -219,7 +225,7 @@ def test_fixture_scores_are_clipped_to_the_unit_interval() -> None:
 def test_fixture_visibility_threshold_and_recall() -> None:
     rng = np.random.default_rng(6)
 
-    def ids(**settings: float) -> list[str]:
+    def ids(**settings: Any) -> list[str]:
         return [d.object_id for d in detect_fixtures(FIXTURE_VIEW, FIXTURE_WORLD, rng, **settings)]
 
     assert ids(min_visible_pixels=300) == ["table", "desk_2", "shelf"]

@@ -24,6 +24,7 @@ from sim.scenario import REPO_ROOT, ScenarioError, load_scenario
 from sim.stream import simulate
 from sim.timeline import Timeline
 from sim.world import Box, World
+from tests.expect import present
 
 CAMERA = CameraModel()
 MUG = Box("mug", "mug", (2.0, 2.0, 0.80), (0.08, 0.08, 0.10))
@@ -119,7 +120,7 @@ def test_cosines_of_the_appearance_model_are_clip_like() -> None:
     run = simulate(scenario, seed=3)
     label_of = {obj.object_id: obj.label for obj in run.frames[0].truth.objects}
     detections = [
-        (d.object_id, d.embedding)
+        (d.object_id, present(d.embedding))
         for frame in run.frames
         for d in frame.detections
         if d.kind == "object" and d.object_id in label_of

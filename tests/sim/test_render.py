@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from sim.camera import CameraModel, look_at
@@ -19,7 +21,7 @@ FRONT_FACE_DEPTH = TARGET.center[0] - TARGET.size[0] / 2 - EYE[0]  # 2.8 m
 
 def lone_box_world(**changes: tuple[Box, ...]) -> World:
     """A room holding only the target box (as an object unless overridden)."""
-    fields = {"room_size": ROOM, "fixtures": (), "objects": (TARGET,), **changes}
+    fields: dict[str, Any] = {"room_size": ROOM, "fixtures": (), "objects": (TARGET,), **changes}
     return World(**fields)
 
 

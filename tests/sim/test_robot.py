@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+from typing import Any
 
 import httpx
 import numpy as np
@@ -28,7 +29,7 @@ class FakeService:
         self.connect_failures = connect_failures
         self.batch_status = batch_status
         self.scene_requests: list[dict[str, object]] = []
-        self.batches: list[dict[str, object]] = []
+        self.batches: list[dict[str, Any]] = []
 
     def __call__(self, request: httpx.Request) -> httpx.Response:
         if self.connect_failures > 0:

@@ -113,4 +113,5 @@ def test_a_saved_run_loads_back_equal(tmp_path: Path) -> None:
             assert left.class_scores == right.class_scores
             assert (left.embedding is None) == (right.embedding is None)
             if left.embedding is not None:
+                assert right.embedding is not None
                 assert np.array_equal(left.embedding, right.embedding)

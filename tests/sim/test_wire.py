@@ -5,6 +5,7 @@ from __future__ import annotations
 import base64
 import io
 import json
+from typing import Any
 
 import numpy as np
 import pytest
@@ -116,7 +117,7 @@ def test_fixture_detection_sends_kind_and_class_scores() -> None:
     mask = np.zeros((48, 64), dtype=bool)
     mask[20:40, 10:50] = True
     # numpy scalars must come out as plain floats, or json.dumps refuses them.
-    class_scores = {"desk": np.float64(0.51), "table": np.float32(0.49)}
+    class_scores: dict[str, Any] = {"desk": np.float64(0.51), "table": np.float32(0.49)}
     desk = SimDetection("desk-1", "desk", 0.51, mask, None, "fixture", class_scores)
     encoded = json.loads(json.dumps(encode_detection(desk)))
     assert encoded["kind"] == "fixture" and encoded["label"] == "desk"
