@@ -1,4 +1,5 @@
-"""The dependency rules of ARCHITECTURE.md section 2, checked by reading the imports."""
+"""The dependency rules of ARCHITECTURE.md (section 2, in this repository), checked by reading
+the imports."""
 
 from __future__ import annotations
 
