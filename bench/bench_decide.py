@@ -62,40 +62,48 @@ def twenty_objects_frame(seed: int) -> tuple[World, Frame]:
     return world, frame
 
 
+def sighted(track_id: str, label: str, center: np.ndarray, rng: np.random.Generator) -> Event:
+    """A hypothesis seen once, with appearance, as decide writes it."""
+    return ObjectAdded(
+        track_id=track_id,
+        state="tentative",
+        frame_id="x",
+        observations=(
+            Observation(
+                frame_id="x",
+                label=label,
+                score=0.9,
+                center=(float(center[0]), float(center[1]), float(center[2])),
+                extent=(0.1, 0.1, 0.1),
+                valid_pixels=500,
+                parent=None,
+            ),
+        ),
+        embedding_sum=tuple(float(v) for v in rng.normal(size=64)),
+        embedding_count=1,
+        timestamp=0.0,
+        existence_logodds=1.0,
+        p_exist=0.73,
+        batches_observed=1,
+        parent_evidence={},
+    )
+
+
 def state_with_500_tracks(frame: Frame, seed: int) -> SceneState:
     """The 20 objects as confirmed tracks, plus 480 tracks elsewhere (some in view, most not)."""
     state = SceneState()
     for i in range(2):
         state = fold(state, decide(state, Batch(f"warm{i}", (frame,))))
     rng = np.random.default_rng(seed)
-    extra = []
-    for k in range(480):
-        center = rng.uniform([0.2, 0.2, 0.1], [7.8, 5.8, 2.0])
-        extra.append(
-            ObjectAdded(
-                track_id=f"trk-{state.next_track_number + k:06d}",
-                state="tentative",
-                frame_id="x",
-                observations=(
-                    Observation(
-                        frame_id="x",
-                        label=LABELS[k % len(LABELS)],
-                        score=0.9,
-                        center=(float(center[0]), float(center[1]), float(center[2])),
-                        extent=(0.1, 0.1, 0.1),
-                        valid_pixels=500,
-                        parent=None,
-                    ),
-                ),
-                embedding_sum=tuple(float(v) for v in rng.normal(size=64)),
-                embedding_count=1,
-                timestamp=0.0,
-                existence_logodds=1.0,
-                p_exist=0.73,
-                batches_observed=1,
-                parent_evidence={},
-            )
+    extra = [
+        sighted(
+            f"trk-{state.next_track_number + k:06d}",
+            LABELS[k % len(LABELS)],
+            rng.uniform([0.2, 0.2, 0.1], [7.8, 5.8, 2.0]),
+            rng,
         )
+        for k in range(480)
+    ]
     return fold(state, extra)
 
 
@@ -105,32 +113,8 @@ def with_hypotheses(state: SceneState, count: int, retire: bool, seed: int) -> S
     events: list[Event] = []
     for k in range(count):
         track_id = f"trk-{state.next_track_number + k:06d}"
-        center = rng.uniform([0.2, 0.0, 0.1], [7.8, 1.0, 2.0])  # y < 1.2: behind the camera
-        events.append(
-            ObjectAdded(
-                track_id=track_id,
-                state="tentative",
-                frame_id="x",
-                observations=(
-                    Observation(
-                        frame_id="x",
-                        label=LABELS[k % len(LABELS)],
-                        score=0.9,
-                        center=(float(center[0]), float(center[1]), float(center[2])),
-                        extent=(0.1, 0.1, 0.1),
-                        valid_pixels=500,
-                        parent=None,
-                    ),
-                ),
-                embedding_sum=tuple(float(v) for v in rng.normal(size=64)),
-                embedding_count=1,
-                timestamp=0.0,
-                existence_logodds=1.0,
-                p_exist=0.73,
-                batches_observed=1,
-                parent_evidence={},
-            )
-        )
+        behind = rng.uniform([0.2, 0.0, 0.1], [7.8, 1.0, 2.0])  # y < 1.2: behind the camera
+        events.append(sighted(track_id, LABELS[k % len(LABELS)], behind, rng))
         if retire:
             events.append(
                 TrackRetired(
