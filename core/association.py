@@ -5,6 +5,8 @@ Proposals match tracks by class compatibility, 3D distance < 0.8 m and appearanc
 confusable classes (cup/mug), so class agreement is the compatibility of the proposal's class
 scores with the track's class belief, not equality of two labels. Then the unique-class fallback
 recovers an identity after large motion, but only of a track whose absence is established.
+Last, a proposal left over that is only a piece of an object another proposal of the frame
+shows (an over-segmented mask) is set aside rather than taken for a new object.
 """
 
 from __future__ import annotations
@@ -171,3 +173,56 @@ def _appearance_allows(
     return appearance_agrees(
         pool.embedding_of(row), proposal.embedding, params.min_appearance_cosine
     )
+
+
+def fragments(
+    proposals: Sequence[Proposal],
+    matches: Mapping[int, str],
+    size_of: Callable[[str], FloatArray],
+    params: AssociationParams,
+) -> set[int]:
+    """Unmatched proposals that are pieces of an object another proposal of this frame shows.
+
+    A detector may report one object as two masks. The leftover piece is not a new object when
+    it has a compatible class and appearance and its box, joined with the box of a proposal
+    that stands for the object (matched to a track, or kept before it as the larger new one),
+    stays within `fragment_max_growth` times the object's size (`size_of` its track, or the
+    kept proposal's own extent) on every axis.
+    """
+    growth = params.fragment_max_growth
+    if growth <= 0.0:
+        return set()
+    references: list[tuple[Proposal, FloatArray]] = [
+        (proposals[j], np.maximum(size_of(track_id), proposals[j].extent))
+        for j, track_id in sorted(matches.items())
+    ]
+    leftover = sorted(
+        (j for j in range(len(proposals)) if j not in matches),
+        key=lambda j: (-proposals[j].valid_pixels, j),
+    )
+    pieces: set[int] = set()
+    for j in leftover:
+        proposal = proposals[j]
+        if any(_piece_of(proposal, whole, size, params) for whole, size in references):
+            pieces.add(j)
+        else:
+            references.append((proposal, proposal.extent))
+    return pieces
+
+
+def _piece_of(
+    piece: Proposal, whole: Proposal, size: FloatArray, params: AssociationParams
+) -> bool:
+    if piece.kind != whole.kind:
+        return False
+    observed = class_distribution(piece.label, piece.class_scores)
+    if (
+        class_compatibility(class_distribution(whole.label, whole.class_scores), observed)
+        < params.min_class_compatibility
+    ):
+        return False
+    if not appearance_agrees(whole.embedding, piece.embedding, params.min_appearance_cosine):
+        return False
+    low = np.minimum(piece.center - piece.extent / 2, whole.center - whole.extent / 2)
+    high = np.maximum(piece.center + piece.extent / 2, whole.center + whole.extent / 2)
+    return bool(np.all(high - low <= params.fragment_max_growth * size))

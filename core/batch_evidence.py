@@ -134,6 +134,16 @@ class BatchEvidence:
         """Identity for an object proposal no track explains: a new hypothesis."""
         return self._new_id(proposal.kind, proposal.center)
 
+    def extent_of(self, track_id: str) -> FloatArray:
+        """A track's size: its visibility box, the union of its views (partial views give
+        partial boxes); one created in this batch: its first proposal's extent."""
+        arrays = self.state.arrays
+        row = self._row[track_id]
+        if row < len(arrays.track_ids):
+            extent: FloatArray = arrays.box_extents[row]
+            return extent
+        return self.observations[track_id][0].extent
+
     def observe(self, track_id: str, proposal: Proposal) -> None:
         """A proposal matched (or created) this track; later frames gate on its latest center."""
         self.observations.setdefault(track_id, []).append(proposal)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from core.association import associate
+from core.association import associate, fragments
 from core.batch_evidence import BatchEvidence
 from core.events import Event
 from core.fixture_step import fixture_batch
@@ -37,8 +37,12 @@ def decide(
         #    greedy 1:1, then the unique-class fallback for tracks whose absence is established;
         #    removed tracks take part (section 3.3).
         matches = associate(proposals, evidence.pool(), params.association)
+        #    A leftover piece of an object another proposal shows (an over-segmented mask) is
+        #    set aside, not taken for a new object.
+        pieces = fragments(proposals, matches, evidence.extent_of, params.association)
         for j, proposal in enumerate(proposals):
-            evidence.observe(matches.get(j) or evidence.new_track(proposal), proposal)
+            if j not in pieces:
+                evidence.observe(matches.get(j) or evidence.new_track(proposal), proposal)
     # 5. One existence update per track per batch (equation (3)), support parents from
     #    geometry, then lifecycle events.
     head = [fixtures.evidence_event] if fixtures.evidence_event is not None else []

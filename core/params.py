@@ -88,6 +88,12 @@ class AssociationParams:
     # Only a track whose absence is established lends its identity: removed or demoted, or its
     # place seen empty in this many batches (one miss may be the detector's, not the object's).
     fallback_min_misses: Annotated[int, Field(ge=1, le=1000)] = 2
+    # Not in the paper: detectors over-segment (one mug reported as two masks). A second
+    # proposal of a compatible class whose box, joined with the box of a proposal matched in the
+    # same frame, stays within this factor of the object's size on every axis is a piece of that
+    # object, not a new one: two solid objects of that size side by side span at least twice it.
+    # 0 switches the rule off (every unmatched proposal is a new hypothesis, as in the paper).
+    fragment_max_growth: Annotated[float, Field(ge=0.0, le=10.0)] = 1.5
 
 
 # The log-odds clamp may not exceed this: logistic() of it is still distinguishable from 1.
