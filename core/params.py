@@ -323,13 +323,13 @@ def _jsonable(value: Any) -> Any:
     return value
 
 
-def _deep_merge(defaults: dict[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
+def deep_merge(defaults: dict[str, Any], overrides: Mapping[str, Any]) -> dict[str, Any]:
     """Nested objects merge key by key (per-class maps too); anything else replaces."""
     merged = dict(defaults)
     for key, value in overrides.items():
         current = merged.get(key)
         if isinstance(current, dict) and isinstance(value, Mapping):
-            merged[key] = _deep_merge(current, value)
+            merged[key] = deep_merge(current, value)
         else:
             merged[key] = value
     return merged
@@ -341,7 +341,7 @@ _ADAPTER: TypeAdapter[Params] = TypeAdapter(Params)
 @functools.lru_cache(maxsize=256)
 def _validated(overrides: bytes) -> Params:
     """Params from canonical JSON overrides (cached: every replay and snapshot reads them)."""
-    merged = _deep_merge(DEFAULT_PARAMS.to_dict(), orjson.loads(overrides))
+    merged = deep_merge(DEFAULT_PARAMS.to_dict(), orjson.loads(overrides))
     try:
         return _ADAPTER.validate_json(orjson.dumps(merged), strict=True)
     except ValidationError as error:

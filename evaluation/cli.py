@@ -54,6 +54,13 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
         parser.add_argument(
             "--frames", type=int, help="shorten every scenario to N frames (same story, faster)"
         )
+        parser.add_argument(
+            "--params",
+            metavar="JSON",
+            help="parameter overrides for every method and world, e.g. "
+            '\'{"visibility": {"min_expected_image_fraction": 0.001}}\' (each method\'s own '
+            "settings still apply on top; default: core/params.py)",
+        )
         parser.add_argument("--quiet", action="store_true", help="no progress bar")
         parser.set_defaults(handler=run)
 
@@ -61,11 +68,15 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
 def run(args: argparse.Namespace) -> int:
     """Run a protocol and write its report."""
     # Imported here so that `pbdag serve` never loads the simulator (open3d) just to build its CLI.
+    import json
     import os
+    import sys
 
     import httpx
 
-    from evaluation.methods import DYNAMIC_METHODS, FIXTURE_METHODS, method_named
+    from core.errors import InvalidParams
+    from core.params import Params
+    from evaluation.methods import DYNAMIC_METHODS, FIXTURE_METHODS, method_named, with_params
     from evaluation.protocols import run_protocol
     from evaluation.report import write_report
     from evaluation.tables import console_summary
@@ -78,6 +89,17 @@ def run(args: argparse.Namespace) -> int:
         if args.methods
         else list(catalogue)
     )
+    overrides: dict[str, object] = {}
+    if args.params:
+        try:
+            overrides = json.loads(args.params)
+            if not isinstance(overrides, dict):
+                raise ValueError("expected a JSON object")
+            Params.from_dict(overrides)
+        except (ValueError, InvalidParams) as error:
+            print(f"pbdag eval: --params: {error}", file=sys.stderr)
+            return 2
+        methods = with_params(methods, overrides)
     token = args.token or os.environ.get("PBDAG_TOKEN")
     client = (
         httpx.Client(
@@ -101,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if client is not None:
             client.close()
-    written = write_report(protocol, rows, args.out, args.seeds)
+    written = write_report(protocol, rows, args.out, args.seeds, overrides)
     print(console_summary(protocol, rows))
     for path in written:
         print(f"wrote {path}")

@@ -8,11 +8,11 @@ None of them changes the core's code. evaluation/README.md cites where each rule
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from core.params import FixtureParams
+from core.params import FixtureParams, deep_merge
 from core.rules import UpdateRules
 from evaluation.conceptgraphs import ConceptGraphsHooks
 from evaluation.hooks import RunnerHooks
@@ -192,3 +192,12 @@ def method_named(
         if method.name.lower() == name.lower():
             return method
     raise KeyError(f"unknown method {name!r}; known: {', '.join(m.name for m in methods)}")
+
+
+def with_params(methods: Sequence[Method], overrides: Mapping[str, Any]) -> list[Method]:
+    """The methods on one parameter set other than core/params.py's defaults: `overrides` for
+    every method, with each method's own settings (what makes it that method) on top."""
+    return [
+        dataclasses.replace(method, params=deep_merge(dict(overrides), method.params))
+        for method in methods
+    ]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import subprocess
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -112,9 +112,14 @@ def _bars(path: Path, groups: Sequence[str], series: dict[str, list[float]], tit
 
 
 def write_report(
-    protocol: str, rows: Sequence[dict[str, Any]], out: Path, seeds: Sequence[int]
+    protocol: str,
+    rows: Sequence[dict[str, Any]],
+    out: Path,
+    seeds: Sequence[int],
+    params: Mapping[str, Any] | None = None,
 ) -> list[Path]:
-    """results.json, table.md and the figures under `out`."""
+    """results.json, table.md and the figures under `out`; `params`: the overrides of
+    core/params.py every method ran with (none: its defaults)."""
     out.mkdir(parents=True, exist_ok=True)
     scenarios = {
         r["scenario"]: {"file": r["scenario_file"], "sha256": r["scenario_sha256"]} for r in rows
@@ -123,6 +128,7 @@ def write_report(
         "protocol": protocol,
         "code_version": code_version(),
         "seeds": list(seeds),
+        "params": dict(params or {}),
         "scenarios": scenarios,
         "runs": list(rows),
     }
@@ -130,7 +136,13 @@ def write_report(
     runs = len({(r["scenario"], r["seed"]) for r in rows})
     header = (
         f"Mean ± sample std over {runs} scenario-seed runs (seeds {', '.join(map(str, seeds))}); "
-        f"code {results['code_version']}.\n\n"
+        f"code {results['code_version']}; parameters: "
+        + (
+            f"core/params.py with {json.dumps(params, sort_keys=True)}"
+            if params
+            else "core/params.py"
+        )
+        + ".\n\n"
     )
     if protocol == "dynamic":
         text = "# Dynamic memory (the paper's Table 2)\n\n" + header + dynamic_text(rows)

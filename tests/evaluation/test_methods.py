@@ -15,6 +15,7 @@ from evaluation.methods import (
     Method,
     MethodUnavailable,
     method_named,
+    with_params,
 )
 
 DIM = 4
@@ -112,3 +113,21 @@ def test_dynamem_asks_the_core_for_free_space_misses() -> None:
     assert dynamem.rule_flags["miss_evidence"] == "free_space"
     names = [method.name for method in DYNAMIC_METHODS]
     assert names[:4] == ["PBD-AG", "DynaMem-inspired", "ConceptGraphs-inspired", "Last observation"]
+
+
+def test_one_parameter_set_for_every_method_with_each_methods_own_settings_on_top() -> None:
+    overrides = {
+        "visibility": {"min_expected_image_fraction": 0.002},
+        "lifecycle": {"confirm_min_batches": 3, "remove_min_visible_misses": 4},
+    }
+    methods = {m.name: m for m in with_params(DYNAMIC_METHODS, overrides)}
+    ours = Params.from_dict(methods["PBD-AG"].params)
+    assert ours.visibility.min_expected_image_fraction == 0.002
+    assert ours.lifecycle.confirm_min_batches == 3
+    dynamem = Params.from_dict(methods["DynaMem-inspired"].params)
+    # The override reaches the baseline, but what makes DynaMem DynaMem stays.
+    assert dynamem.visibility.min_expected_image_fraction == 0.002
+    assert dynamem.lifecycle.confirm_min_batches == 1
+    assert dynamem.lifecycle.remove_min_visible_misses == 1
+    # The catalogue itself is untouched.
+    assert method_named("PBD-AG").params == {}

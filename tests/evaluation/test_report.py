@@ -1,12 +1,18 @@
-"""The report's table: mean ± sample std per method, event recall and false absence pooled."""
+"""The report's table: mean ± sample std per method, event recall and false absence pooled;
+the parameter set the methods ran on."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from evaluation.report import write_report
 from evaluation.tables import table
+from service.cli import main
+from sim import SCENARIOS_DIR
 
 
 def run(
@@ -92,3 +98,18 @@ def test_the_headline_is_the_hotel_suite_alone_and_shortfalls_carry_their_trace(
     assert "track from then on: 12:miss" in text
     assert "hotel-suite seed 7: mug was present with no PBD-AG node" in text
     assert "- X: not run (no rule yet)." in text
+
+
+def test_eval_runs_every_method_on_one_given_parameter_set_and_records_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    common = ["eval", "dynamic", "--seeds", "7", "--frames", "20", "--quiet"]
+    common += ["--scenario", str(SCENARIOS_DIR / "hotel-suite.yaml"), "--out", str(tmp_path)]
+    bad = '{"visibility": {"min_expected_image_fraction": 2}}'
+    assert main([*common, "--methods", "PBD-AG", "--params", bad]) == 2
+    assert "params.visibility.min_expected_image_fraction" in capsys.readouterr().err
+    assert not (tmp_path / "results.json").exists()
+    good = {"visibility": {"min_expected_image_fraction": 0.002}}
+    assert main([*common, "--methods", "PBD-AG", "--params", json.dumps(good)]) == 0
+    assert json.loads((tmp_path / "results.json").read_text())["params"] == good
+    assert '"min_expected_image_fraction": 0.002' in (tmp_path / "table.md").read_text()
