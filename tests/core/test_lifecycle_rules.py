@@ -14,7 +14,7 @@ from core.masks import Mask
 from core.observation import Batch
 from core.params import Params
 from core.state import SceneState
-from tests.core.scenes import look_pose, scene_batch
+from tests.core.scenes import look_pose, scene_batch, track_events
 
 MUG = {"mug_1": ((0.2, 0.1, 2.0), 0.1)}
 
@@ -25,7 +25,7 @@ def run(state: SceneState, batches: Iterable[Batch]) -> tuple[SceneState, list[l
     for batch in batches:
         events = decide(state, batch)
         state = fold(state, events)
-        per_batch.append(events)
+        per_batch.append(track_events(events))
     return state, per_batch
 
 

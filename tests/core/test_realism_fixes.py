@@ -17,7 +17,15 @@ from core.state import SceneState
 from core.visibility import observable, samples_passed
 from sim.world import object_on
 from tests.core.rendered import ROOM, TABLE, TABLE_VIEWS, batches, frame
-from tests.core.scenes import INTRINSICS, detection, look_pose, paint_box, scene_batch, wall
+from tests.core.scenes import (
+    INTRINSICS,
+    detection,
+    look_pose,
+    paint_box,
+    scene_batch,
+    track_events,
+    wall,
+)
 from tests.core.scenes import frame as analytic_frame
 
 MUG = {"mug_1": ((0.2, 0.1, 2.0), 0.1)}
@@ -28,7 +36,7 @@ def run(state: SceneState, batch_list: list[Batch]) -> tuple[SceneState, list[li
     for batch in batch_list:
         events = decide(state, batch)
         state = fold(state, events)
-        per_batch.append(events)
+        per_batch.append(track_events(events))
     return state, per_batch
 
 
@@ -91,7 +99,7 @@ def test_a_sliver_at_the_image_border_is_not_a_miss() -> None:
         state.params,
         visibility=replace(params, min_expected_image_fraction=0.0, min_in_image_share=0.0),
     )
-    events = decide(state, sliver, anything)
+    events = track_events(decide(state, sliver, anything))
     assert [e.details().get("evidence") for e in events] == ["visible_miss"]
 
 
