@@ -83,12 +83,14 @@ class Navigation:
         else:
             self.clearance = np.full(codes.shape, np.inf)
         traversable = self.free & (self.clearance >= params.robot_radius_m)
-        # The robot stands where it is: the free cells under its footprint are traversable.
-        self.robot_cell = (int(robot_row[0]) - r0, int(robot_col[0]) - c0)
-        under = self._disc(self.robot_cell, params.robot_radius_m) & ~self.occupied
-        traversable |= under & (self.codes != CODE_UNKNOWN)
-        traversable[self.robot_cell] = not self.occupied[self.robot_cell]
         shape = (codes.shape[0] // k, codes.shape[1] // k)
+        # Known-free travel cells clear of obstacles by the robot radius: where views may be.
+        self.known_ok: BoolArray = traversable.reshape(shape[0], k, shape[1], k).all(axis=(1, 3))
+        # The robot stands where it is: the cells under its footprint that are not occupied
+        # are traversable (known or not), so that it can move off them.
+        self.robot_cell = (int(robot_row[0]) - r0, int(robot_col[0]) - c0)
+        traversable |= self._disc(self.robot_cell, params.robot_radius_m) & ~self.occupied
+        traversable[self.robot_cell] = not self.occupied[self.robot_cell]
         self.travel_ok: BoolArray = traversable.reshape(shape[0], k, shape[1], k).all(axis=(1, 3))
         start = (self.robot_cell[0] // k, self.robot_cell[1] // k)
         self.travel_ok[start] = not self.occupied[self.robot_cell]
@@ -183,70 +185,93 @@ class Navigation:
     # -- frontiers -----------------------------------------------------------------------------
 
     def frontiers(self, min_cells: int) -> list[Frontier]:
-        """Clusters (8-connected) of free cells with an unknown 4-neighbour, largest first."""
-        unknown = np.pad(self.codes == CODE_UNKNOWN, 1, constant_values=True)
-        cross = ndimage.generate_binary_structure(2, 1)
-        bordering = np.asarray(ndimage.binary_dilation(unknown, structure=cross), dtype=bool)
-        frontier = self.free & bordering[1:-1, 1:-1]
-        labels, count = ndimage.label(frontier, structure=np.ones((3, 3), dtype=bool))
-        if count == 0:
-            return []
-        rows, cols = np.nonzero(labels)
-        ids = labels[rows, cols] - 1
-        sizes = np.bincount(ids, minlength=count)
-        centroid_row = np.bincount(ids, weights=rows, minlength=count) / sizes
-        centroid_col = np.bincount(ids, weights=cols, minlength=count) / sizes
-        cx, cy = self.geometry.center_of(
-            centroid_row + self.origin[0], centroid_col + self.origin[1]
-        )
-        goals = self._frontier_goals(rows, cols, ids, count, cx, cy)
-        found = []
-        for i in range(count):
-            if sizes[i] < min_cells:
-                continue
-            goal = goals[i]
-            found.append(
-                Frontier(
-                    size=int(sizes[i]),
-                    centroid=(float(cx[i]), float(cy[i])),
-                    goal=None if goal is None else goal[0],
-                    travel_m=None if goal is None else goal[1],
-                )
+        """Frontier clusters of at least `min_cells`, largest first, each with its goal."""
+        clusters = FrontierCells.of(self.codes, self.origin, self.geometry)
+        goals = self._frontier_goals(clusters)
+        found = [
+            Frontier(
+                size, centroid, None if goal is None else goal[0], None if goal is None else goal[1]
             )
+            for size, centroid, goal in zip(clusters.sizes, clusters.centroids, goals, strict=True)
+            if size >= min_cells
+        ]
         return sorted(found, key=lambda f: (-f.size, f.centroid))
 
     def _frontier_goals(
-        self,
-        rows: IntArray,
-        cols: IntArray,
-        ids: IntArray,
-        count: int,
-        cx: FloatArray,
-        cy: FloatArray,
+        self, clusters: FrontierCells
     ) -> list[tuple[tuple[float, float], float] | None]:
         """Per cluster, the reachable travel cell (holding or beside one of its cells) nearest
         its centroid, with D_t there."""
         k = self.factor
         height, width = self.travel.shape
         centers_x, centers_y = self.travel_centers()
-        candidates = []
+        parts = []
         for dr in (-1, 0, 1):
             for dc in (-1, 0, 1):
-                r, c = rows // k + dr, cols // k + dc
+                r, c = clusters.rows // k + dr, clusters.cols // k + dc
                 keep = (r >= 0) & (r < height) & (c >= 0) & (c < width)
-                r, c, i = r[keep], c[keep], ids[keep]
+                r, c, i = r[keep], c[keep], clusters.ids[keep]
                 reachable = np.isfinite(self.travel[r, c])
-                candidates.append((r[reachable], c[reachable], i[reachable]))
-        r = np.concatenate([c[0] for c in candidates])
-        c = np.concatenate([c[1] for c in candidates])
-        i = np.concatenate([c[2] for c in candidates])
-        goals: list[tuple[tuple[float, float], float] | None] = [None] * count
+                parts.append((r[reachable], c[reachable], i[reachable]))
+        r = np.concatenate([p[0] for p in parts])
+        c = np.concatenate([p[1] for p in parts])
+        i = np.concatenate([p[2] for p in parts])
+        goals: list[tuple[tuple[float, float], float] | None] = [None] * len(clusters.sizes)
         if i.size == 0:
             return goals
         x, y = centers_x[r, c], centers_y[r, c]
+        cx = np.array([centroid[0] for centroid in clusters.centroids])
+        cy = np.array([centroid[1] for centroid in clusters.centroids])
         distance = np.hypot(x - cx[i], y - cy[i])
         order = np.lexsort((c, r, distance, i))  # per cluster: nearest, then by cell
         first = order[np.concatenate(([True], i[order][1:] != i[order][:-1]))]
         for j in first:
             goals[int(i[j])] = ((float(x[j]), float(y[j])), float(self.travel[r[j], c[j]]))
         return goals
+
+
+@dataclass(frozen=True)
+class FrontierCells:
+    """Frontier cells of a window of the map, clustered: free cells with an unknown
+    4-neighbour (outside the window is unknown), in 8-connected clusters."""
+
+    rows: IntArray  # window rows and columns of the frontier cells
+    cols: IntArray
+    ids: IntArray  # each cell's cluster
+    sizes: list[int]  # per cluster
+    centroids: list[tuple[float, float]]  # per cluster, world x, y
+
+    @classmethod
+    def of(
+        cls, codes: npt.NDArray[np.uint8], origin: tuple[int, int], geometry: MapGeometry
+    ) -> FrontierCells:
+        """The frontier clusters of a window of codes whose cell (0, 0) is `origin`."""
+        unknown = np.pad(codes == CODE_UNKNOWN, 1, constant_values=True)
+        cross = ndimage.generate_binary_structure(2, 1)
+        bordering = np.asarray(ndimage.binary_dilation(unknown, structure=cross), dtype=bool)
+        frontier = (codes == CODE_FREE) & bordering[1:-1, 1:-1]
+        labels, count = ndimage.label(frontier, structure=np.ones((3, 3), dtype=bool))
+        rows, cols = np.nonzero(labels)
+        ids = (labels[rows, cols] - 1).astype(np.int64)
+        sizes = np.bincount(ids, minlength=count)
+        centroid_row = np.bincount(ids, weights=rows, minlength=count) / np.maximum(sizes, 1)
+        centroid_col = np.bincount(ids, weights=cols, minlength=count) / np.maximum(sizes, 1)
+        cx, cy = geometry.center_of(centroid_row + origin[0], centroid_col + origin[1])
+        return cls(
+            rows.astype(np.int64),
+            cols.astype(np.int64),
+            ids,
+            [int(size) for size in sizes],
+            [(float(x), float(y)) for x, y in zip(cx, cy, strict=True)],
+        )
+
+
+def frontier_clusters(grid: OccupancyGrid, geometry: MapGeometry, min_cells: int) -> list[Frontier]:
+    """The map's frontier clusters (size and centroid; no goal without a robot), largest first."""
+    clusters = FrontierCells.of(grid.codes(), grid.origin, geometry)
+    found = [
+        Frontier(size, centroid, None, None)
+        for size, centroid in zip(clusters.sizes, clusters.centroids, strict=True)
+        if size >= min_cells
+    ]
+    return sorted(found, key=lambda f: (-f.size, f.centroid))

@@ -5,7 +5,8 @@ the robot's height band mark their cells occupied. Free cells come from rays: th
 binned by their bearing from the camera, as a laser scan is made from depth, and each bin is
 clear from the camera up to its nearest obstacle point (stopped a little short), or, with no
 obstacle in it, up to its farthest floor point; points above the band clear nothing (the floor
-under a ceiling point was not seen). Over the frames of a batch occupied wins over free.
+under a ceiling point was not seen). The disc the robot stands on, under the camera, is free.
+Over the frames of a batch occupied wins over free.
 """
 
 from __future__ import annotations
@@ -55,8 +56,20 @@ def frame_cells(frame: Frame, params: OccupancyParams) -> tuple[IntArray, IntArr
     # hold a floor point behind an obstacle whose points fell in the bins beside it.
     spread = params.pixel_stride / min(frame.intrinsics.fx, frame.intrinsics.fy)
     rays_x, rays_y = _rays(window.camera, dx, dy, reach, obstacle, floor, spread, params)
-    free = window.cells(rays_x, rays_y)
+    foot_x, foot_y = _footprint(window.camera, params)
+    free = window.cells(np.concatenate((rays_x, foot_x)), np.concatenate((rays_y, foot_y)))
     return np.setdiff1d(free, occupied, assume_unique=True), occupied
+
+
+def _footprint(camera: FloatArray, params: OccupancyParams) -> tuple[FloatArray, FloatArray]:
+    """Points on a grid of half a cell over the disc the robot stood on, under the camera."""
+    radius = params.footprint_radius_m
+    if radius <= 0:
+        return np.zeros(0), np.zeros(0)
+    offsets = np.arange(-radius, radius + 1e-9, params.resolution_m / 2)
+    dx, dy = np.meshgrid(offsets, offsets)
+    inside = dx**2 + dy**2 <= radius**2
+    return camera[0] + dx[inside], camera[1] + dy[inside]
 
 
 class _Window:

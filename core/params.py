@@ -323,6 +323,9 @@ class OccupancyParams:
     ray_bins_per_cell_at_max_range: Annotated[int, Field(ge=1, le=16)] = 2
     # Stop the free ray this short of the obstacle (its cell is occupied, not free).
     ray_stop_short_m: Metres = 0.05
+    # The robot stood where its camera was: the cells within this of the camera's floor
+    # projection are free (the planner's robot radius; 0 for a camera not on the robot).
+    footprint_radius_m: Annotated[float, Field(ge=0.0, le=5.0)] = 0.25
     occupied_hit: Annotated[int, Field(ge=1, le=16)] = 2
     free_hit: Annotated[int, Field(ge=1, le=16)] = 1
     # -1: one occupied batch makes any free cell occupied (obstacles appear at once, safe for

@@ -22,6 +22,8 @@ import math
 from dataclasses import dataclass
 from typing import Any, Literal
 
+import numpy as np
+
 from core.errors import InvalidCommand
 from core.events import Event, InspectionTargeted
 from core.navigation import Frontier, Navigation
@@ -224,6 +226,12 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
                 deferred=tuple(deferred),
             )
         deferred.append(Deferral(entry.fixture_id, "no_feasible_view"))
+    if not (np.isfinite(navigation.travel) & navigation.known_ok).any():
+        return make(
+            "explore",
+            "the robot is not in known free space: turn in place to observe",
+            deferred=tuple(deferred),
+        )
     return make(
         "done",
         "no fixture with a feasible view and no reachable frontier",

@@ -150,7 +150,7 @@ def feasible_views(
     else:
         pick = np.ones(travel.shape, dtype=bool)
     standoff = support.distance(xs, ys)
-    pick &= np.isfinite(travel)
+    pick &= np.isfinite(travel) & navigation.known_ok  # connected known-free cells
     pick &= (standoff >= params.min_standoff_m) & (standoff <= params.max_standoff_m)
     rows, cols = np.nonzero(pick)
     if rows.size > params.max_candidate_views:  # a deterministic stride over the ring
