@@ -152,10 +152,12 @@ class Navigation:
         return clearance
 
     def _fine(self, x: FloatArray, y: FloatArray) -> tuple[IntArray, IntArray, BoolArray]:
-        row, col, inside = self.geometry.cell_of(x, y)
-        row, col = row - self.origin[0], col - self.origin[1]
+        """Window rows and columns of finite world points, and whether inside the window."""
+        res, half = self.geometry.resolution_m, self.geometry.side // 2
+        col = np.floor(x / res).astype(np.int64) + (half - self.origin[1])
+        row = np.floor(y / res).astype(np.int64) + (half - self.origin[0])
         height, width = self.codes.shape
-        keep = inside & (row >= 0) & (row < height) & (col >= 0) & (col < width)
+        keep = (row >= 0) & (row < height) & (col >= 0) & (col < width)
         return np.where(keep, row, 0), np.where(keep, col, 0), keep
 
     # -- line of sight -------------------------------------------------------------------------

@@ -31,7 +31,7 @@ from core.occupancy import MapGeometry
 from core.params import Params
 from core.state import SceneState, Track, ViewPose
 from core.uncertainty import Uncertainty, fixture_uncertainty
-from core.views import View, feasible_views
+from core.views import View, best_view
 
 Decision = Literal["inspect", "explore", "done"]
 QueueStatus = Literal["queued", "in_progress", "retry_cooldown"]
@@ -160,28 +160,26 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
     if lock is not None and lock.fixture_id in by_id:
         fixture = by_id[lock.fixture_id]
         held = candidate(state, fixture, robot)
-        views = feasible_views(
+        view = best_view(
             navigation,
             fixture,
             failed.get(fixture.track_id, ()),
             params.planner,
             only=(lock.view.x, lock.view.y),
         )
-        if views:
+        if view is not None:
             return make(
                 "inspect",
                 "the locked target, its view still feasible",
-                target=Target(held, views[0]),
+                target=Target(held, view),
                 lock="held",
             )
-        views = feasible_views(
-            navigation, fixture, failed.get(fixture.track_id, ()), params.planner
-        )
-        if views:
+        view = best_view(navigation, fixture, failed.get(fixture.track_id, ()), params.planner)
+        if view is not None:
             return make(
                 "inspect",
                 "the locked target, from a new view (the locked one is no longer feasible)",
-                target=Target(held, views[0]),
+                target=Target(held, view),
                 lock="new",
                 replaces=fixture.track_id,
             )
@@ -190,14 +188,14 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
     elif lock is not None:
         replaces = lock.fixture_id  # completed, rejected or removed: the lock is void
     for entry in order:
-        views = feasible_views(
+        view = best_view(
             navigation, by_id[entry.fixture_id], failed.get(entry.fixture_id, ()), params.planner
         )
-        if views:
+        if view is not None:
             return make(
                 "inspect",
                 "the best-ranked fixture with a feasible view (equation (5))",
-                target=Target(entry, views[0]),
+                target=Target(entry, view),
                 lock="new",
                 replaces=replaces,
                 deferred=tuple(deferred),
@@ -213,14 +211,14 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
         )
     cooling = [f for f in unresolved if queue_status(state, f.track_id) == "retry_cooldown"]
     for entry in ranked(state, cooling, robot):
-        views = feasible_views(
+        view = best_view(
             navigation, by_id[entry.fixture_id], failed.get(entry.fixture_id, ()), params.planner
         )
-        if views:
+        if view is not None:
             return make(
                 "inspect",
                 "nothing else is left: a fixture cooling down after a failed capture",
-                target=Target(entry, views[0]),
+                target=Target(entry, view),
                 lock="new",
                 replaces=replaces,
                 deferred=tuple(deferred),

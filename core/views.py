@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -136,15 +137,65 @@ def feasible_views(
     params: PlannerParams,
     only: tuple[float, float] | None = None,
 ) -> list[View]:
-    """Feasible views of the fixture, cheapest first (ties by position); `only` evaluates just
-    the travel cell holding that point (a locked view, re-checked)."""
+    """Every feasible view of the fixture, cheapest first (ties by position); `only` evaluates
+    just the travel cell holding that point (a locked view, re-checked)."""
+    candidates = _candidates(navigation, fixture, failed, params, only)
+    if candidates is None:
+        return []
+    views = candidates.sighted(np.arange(candidates.size))
+    return sorted(views, key=_order)
+
+
+def best_view(
+    navigation: Navigation,
+    fixture: Track,
+    failed: Sequence[ViewPose],
+    params: PlannerParams,
+    only: tuple[float, float] | None = None,
+) -> View | None:
+    """The feasible view minimising J (ties by position), or None: `feasible_views(...)[0]`.
+
+    Line of sight is the costly check, and it can only lower the coverage, so J is bounded
+    below by its value with every in-image support point taken as seen: candidates are
+    checked in the order of that bound until the best J found is below the next bound.
+    """
+    candidates = _candidates(navigation, fixture, failed, params, only)
+    if candidates is None:
+        return None
+    order = np.lexsort((candidates.y, candidates.x, candidates.lower))
+    order = order[candidates.possible[order]]
+    best: View | None = None
+    for start in range(0, order.size, _CHUNK):
+        if best is not None and best.cost < candidates.lower[order[start]]:
+            break
+        for view in candidates.sighted(order[start : start + _CHUNK]):
+            if best is None or _order(view) < _order(best):
+                best = view
+    return best
+
+
+_CHUNK = 32  # candidates checked for line of sight at a time
+
+
+def _order(view: View) -> tuple[float, float, float]:
+    return (view.cost, view.pose.x, view.pose.y)
+
+
+def _candidates(
+    navigation: Navigation,
+    fixture: Track,
+    failed: Sequence[ViewPose],
+    params: PlannerParams,
+    only: tuple[float, float] | None,
+) -> Candidates | None:
+    """Reachable known-free travel cells within the standoff, away from failed views."""
     support = Support.of(fixture)
     xs, ys = navigation.travel_centers()
     travel = navigation.travel
     if only is not None:
         cell = navigation.travel_cell_of(*only)
         if cell is None:
-            return []
+            return None
         pick = np.zeros(travel.shape, dtype=bool)
         pick[cell] = True
     else:
@@ -163,80 +214,111 @@ def feasible_views(
             near |= np.hypot(x - view.x, y - view.y) < params.failed_view_radius_m
         x, y, rows, cols = x[~near], y[~near], rows[~near], cols[~near]
     if x.size == 0:
-        return []
-    return _evaluate(navigation, support, x, y, travel[rows, cols], standoff[rows, cols], params)
+        return None
+    return Candidates(navigation, support, x, y, travel[rows, cols], standoff[rows, cols], params)
 
 
-def _evaluate(
-    navigation: Navigation,
-    support: Support,
-    x: FloatArray,
-    y: FloatArray,
-    travel: FloatArray,
-    standoff: FloatArray,
-    params: PlannerParams,
-) -> list[View]:
-    """Projection, line of sight, coverage, margin and J of candidate positions."""
-    center = np.asarray(support.center)
-    cameras = np.column_stack((x, y, np.full(x.size, params.camera_height_m)))
-    yaw = np.arctan2(center[1] - y, center[0] - x)
-    horizontal = np.hypot(center[0] - x, center[1] - y)
-    pitch = np.clip(
-        np.arctan2(center[2] - params.camera_height_m, horizontal),
-        math.radians(params.min_pitch_deg),
-        math.radians(params.max_pitch_deg),
-    )
-    inner = 1.0 - params.image_margin
-    # The support's centre: in range, inside the image minus its margin, in line of sight.
-    middle = project(cameras, yaw, pitch, center[None, :], params)
-    ignore = _grown(support.footprint, params.own_footprint_margin_m)
-    starts = np.column_stack((x, y))
-    feasible = (
-        middle.in_front[:, 0]
-        & middle.in_range[:, 0]
-        & (np.abs(middle.u[:, 0]) <= inner)
-        & (np.abs(middle.v[:, 0]) <= inner)
-    )
-    feasible &= navigation.line_of_sight(starts, np.tile(center[:2], (x.size, 1)), ignore)
-    # Coverage: support samples in front, in range, inside the image minus the margin, in sight.
-    samples = support.samples(params.support_samples_per_axis)
-    seen = project(cameras, yaw, pitch, samples, params)
-    covered = seen.in_front & seen.in_range
-    covered &= (np.abs(seen.u) <= inner) & (np.abs(seen.v) <= inner)
-    count = samples.shape[0]
-    sight = navigation.line_of_sight(
-        np.repeat(starts, count, axis=0), np.tile(samples[:, :2], (x.size, 1)), ignore
-    ).reshape(x.size, count)
-    coverage = (covered & sight).mean(axis=1)
-    feasible &= coverage >= params.min_coverage
-    # P_margin: how far the farthest corner intrudes into the margin (or beyond the border).
-    corners = project(cameras, yaw, pitch, support.corners(), params)
-    border = np.where(
-        corners.in_front, 1.0 - np.maximum(np.abs(corners.u), np.abs(corners.v)), -1.0
-    ).min(axis=1)
-    if params.image_margin > 0:
-        intrusion = np.clip((params.image_margin - border) / params.image_margin, 0.0, 1.0)
-    else:
-        intrusion = (border < 0).astype(np.float64)
-    clearance = navigation.clearance_at(x, y)
-    terms = view_cost(
-        standoff, travel, clearance, coverage, params.margin_penalty_weight * intrusion, params
-    )
-    cost = np.sum([terms[name] for name in COST_TERMS], axis=0)
-    views = [
-        View(
-            pose=ViewPose(x=float(x[i]), y=float(y[i]), yaw=float(yaw[i])),
-            pitch=float(pitch[i]),
-            standoff_m=float(standoff[i]),
-            travel_m=float(travel[i]),
-            clearance_m=float(min(clearance[i], 1e6)),
-            coverage=float(coverage[i]),
-            cost=float(cost[i]),
-            cost_terms={name: float(terms[name][i]) for name in COST_TERMS},
+class Candidates:
+    """Candidate views of one fixture: what the camera model says of each (projection, range,
+    image margin, clearance), and the bound on J before line of sight."""
+
+    def __init__(
+        self,
+        navigation: Navigation,
+        support: Support,
+        x: FloatArray,
+        y: FloatArray,
+        travel: FloatArray,
+        standoff: FloatArray,
+        params: PlannerParams,
+    ) -> None:
+        self.navigation, self.support, self.params = navigation, support, params
+        self.x, self.y, self.travel, self.standoff = x, y, travel, standoff
+        self.size = x.size
+        center = np.asarray(support.center)
+        cameras = np.column_stack((x, y, np.full(x.size, params.camera_height_m)))
+        self.yaw = np.arctan2(center[1] - y, center[0] - x)
+        horizontal = np.hypot(center[0] - x, center[1] - y)
+        self.pitch = np.clip(
+            np.arctan2(center[2] - params.camera_height_m, horizontal),
+            math.radians(params.min_pitch_deg),
+            math.radians(params.max_pitch_deg),
         )
-        for i in np.flatnonzero(feasible)
-    ]
-    return sorted(views, key=lambda view: (view.cost, view.pose.x, view.pose.y))
+        inner = 1.0 - params.image_margin
+        # The support's centre: in range and inside the image minus its margin.
+        middle = project(cameras, self.yaw, self.pitch, center[None, :], params)
+        self.center_ok = (
+            middle.in_front[:, 0]
+            & middle.in_range[:, 0]
+            & (np.abs(middle.u[:, 0]) <= inner)
+            & (np.abs(middle.v[:, 0]) <= inner)
+        )
+        # Support samples in front, in range and inside the image minus the margin.
+        self.samples = support.samples(params.support_samples_per_axis)
+        seen = project(cameras, self.yaw, self.pitch, self.samples, params)
+        self.in_image = seen.in_front & seen.in_range
+        self.in_image &= (np.abs(seen.u) <= inner) & (np.abs(seen.v) <= inner)
+        # P_margin: how far the farthest corner intrudes into the margin (or beyond the border).
+        corners = project(cameras, self.yaw, self.pitch, support.corners(), params)
+        border = np.where(
+            corners.in_front, 1.0 - np.maximum(np.abs(corners.u), np.abs(corners.v)), -1.0
+        ).min(axis=1)
+        if params.image_margin > 0:
+            intrusion = np.clip((params.image_margin - border) / params.image_margin, 0.0, 1.0)
+        else:
+            intrusion = (border < 0).astype(np.float64)
+        self.margin = params.margin_penalty_weight * intrusion
+        self.clearance = navigation.clearance_at(x, y)
+        # Line of sight only removes support points: J with all in-image points seen is a
+        # lower bound (the same sum, term by term, with a coverage at least as high).
+        upper_coverage = self.in_image.mean(axis=1)
+        self.lower = self._costs(upper_coverage)[1]
+        self.possible = self.center_ok & (upper_coverage >= params.min_coverage)
+
+    def _costs(
+        self, coverage: FloatArray, index: Any = slice(None)
+    ) -> tuple[dict[str, FloatArray], FloatArray]:
+        terms = view_cost(
+            self.standoff[index],
+            self.travel[index],
+            self.clearance[index],
+            coverage,
+            self.margin[index],
+            self.params,
+        )
+        return terms, np.sum([terms[name] for name in COST_TERMS], axis=0)
+
+    def sighted(self, index: npt.NDArray[np.intp]) -> list[View]:
+        """The feasible views among candidates `index`, with line of sight checked."""
+        index = index[self.possible[index]]
+        if index.size == 0:
+            return []
+        nav, support = self.navigation, self.support
+        ignore = _grown(support.footprint, self.params.own_footprint_margin_m)
+        starts = np.column_stack((self.x[index], self.y[index]))
+        center = np.tile(np.asarray(support.center[:2]), (index.size, 1))
+        feasible = nav.line_of_sight(starts, center, ignore)
+        count = self.samples.shape[0]
+        sight = nav.line_of_sight(
+            np.repeat(starts, count, axis=0), np.tile(self.samples[:, :2], (index.size, 1)), ignore
+        ).reshape(index.size, count)
+        coverage = (self.in_image[index] & sight).mean(axis=1)
+        feasible &= coverage >= self.params.min_coverage
+        terms, cost = self._costs(coverage, index)
+        return [
+            View(
+                pose=ViewPose(x=float(self.x[i]), y=float(self.y[i]), yaw=float(self.yaw[i])),
+                pitch=float(self.pitch[i]),
+                standoff_m=float(self.standoff[i]),
+                travel_m=float(self.travel[i]),
+                clearance_m=float(min(self.clearance[i], 1e6)),
+                coverage=float(coverage[j]),
+                cost=float(cost[j]),
+                cost_terms={name: float(terms[name][j]) for name in COST_TERMS},
+            )
+            for j, i in enumerate(index)
+            if feasible[j]
+        ]
 
 
 def _grown(

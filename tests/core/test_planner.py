@@ -19,7 +19,7 @@ from core.params import Params
 from core.planner import decide_plan, inspection_queue, plan, proximity, queue_status
 from core.state import SceneState, Track, ViewPose
 from core.uncertainty import TERMS, fixture_uncertainty
-from core.views import feasible_views, view_cost
+from core.views import best_view, feasible_views, view_cost
 from tests.core.maps import GEOMETRY, grid_of, paint, room
 from tests.core.scenes import frame as analytic_frame
 
@@ -376,3 +376,21 @@ def test_a_robot_outside_the_map_is_refused_naming_the_field() -> None:
     with pytest.raises(InvalidCommand) as error:
         plan(scene(grid_of(room(4.0, 3.0))), ViewPose(x=150.0, y=0.0, yaw=0.0))
     assert error.value.field == "robot_pose"
+
+
+@pytest.mark.parametrize(
+    ("robot", "failed"),
+    [
+        (ROBOT, ()),
+        (ROBOT, (ViewPose(x=1.65, y=3.05, yaw=0.0),)),
+        (ViewPose(x=5.0, y=1.0, yaw=0.0), ()),
+        (ViewPose(x=1.0, y=5.5, yaw=0.0), (ViewPose(x=2.0, y=1.9, yaw=0.0),)),
+    ],
+)
+def test_the_bounded_search_finds_the_cheapest_feasible_view(
+    robot: ViewPose, failed: tuple[ViewPose, ...]
+) -> None:
+    nav = navigation(table_room(), robot)
+    views = feasible_views(nav, TABLE, failed, PARAMS.planner)
+    assert views
+    assert best_view(nav, TABLE, failed, PARAMS.planner) == views[0]
