@@ -151,6 +151,9 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
 
     if state.occupancy.known_cells() == 0:
         return make("explore", "the map is empty: turn in place to observe")
+    if not _beside_the_map(state, geometry, robot):
+        # Nothing known is near: no path, no view (and no planning work over empty space).
+        return make("explore", "the robot is not in known free space: turn in place to observe")
     navigation = Navigation(state.occupancy, geometry, robot, params.planner)
     failed = state.plan.failed_views
     deferred: list[Deferral] = []
@@ -234,6 +237,16 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
         "done",
         "no fixture with a feasible view and no reachable frontier",
         deferred=tuple(deferred),
+    )
+
+
+def _beside_the_map(state: SceneState, geometry: MapGeometry, robot: ViewPose) -> bool:
+    """Whether the robot's cell is inside the map's window, or within its radius of it."""
+    row, col, _inside = geometry.cell_of(np.array([robot.x]), np.array([robot.y]))
+    margin = math.ceil(state.params.planner.robot_radius_m / geometry.resolution_m) + 1
+    (r0, c0), (rows, cols) = state.occupancy.origin, state.occupancy.shape
+    return bool(
+        r0 - margin <= row[0] < r0 + rows + margin and c0 - margin <= col[0] < c0 + cols + margin
     )
 
 

@@ -394,3 +394,12 @@ def test_the_bounded_search_finds_the_cheapest_feasible_view(
     views = feasible_views(nav, TABLE, failed, PARAMS.planner)
     assert views
     assert best_view(nav, TABLE, failed, PARAMS.planner) == views[0]
+
+
+def test_a_robot_far_from_the_known_map_is_told_to_look_around_without_planning() -> None:
+    state = scene(grid_of(room(4.0, 3.0)))
+    far = plan(state, ViewPose(x=90.0, y=-90.0, yaw=0.0))
+    assert far.decision == "explore" and far.frontier is None and far.target is None
+    assert "not in known free space" in far.reason
+    inside = plan(state, ROBOT)
+    assert inside.decision == "done"  # a closed, fully known room: nothing to do

@@ -108,10 +108,10 @@ def test_the_free_space_rule_counts_a_miss_only_where_depth_shows_free_space() -
     free_space = UpdateRules(miss_evidence="free_space")
     # Undetected but still there: depth shows its surface, not free space.
     still_there = scene_batch("undetected", MUG, detect=set())
-    assert decide(state, still_there, rules=free_space) == []
-    assert decide(state, still_there)  # the paper's gate counts it as a visible miss
+    assert track_events(decide(state, still_there, rules=free_space)) == []
+    assert track_events(decide(state, still_there))  # the paper's gate: a visible miss
     # Gone: the wall behind it shows free space where it was.
-    gone = decide(state, scene_batch("gone", {}), rules=free_space)
+    gone = track_events(decide(state, scene_batch("gone", {}), rules=free_space))
     assert [e.details()["evidence"] for e in gone] == ["visible_miss"]
 
 
@@ -167,7 +167,7 @@ def test_a_batch_with_full_frame_masks_is_bounded_by_sampling() -> None:
     mask = np.ones((INTRINSICS.height, INTRINSICS.width), dtype=bool)
     big = Detection("rug", 0.9, "object", Mask.from_array(mask))
     batch = Batch("b", (analytic_frame("f", depth, [big]),))
-    events = decide(SceneState(), batch)
+    events = track_events(decide(SceneState(), batch))
     observation = events[0].details()["observations"][0]
     assert abs(observation["valid_pixels"] - mask.size) <= mask.size * 0.01
 
