@@ -39,6 +39,7 @@ openapi: setup  ## regenerate api_schema/openapi.json from the app
 bench: setup  ## the performance benchmarks (figures printed and written to bench/results/)
 	$(BIN)/python -m bench.bench_render
 	$(BIN)/python -m bench.bench_decide
+	$(BIN)/python -m bench.bench_plan
 	$(BIN)/python -m bench.bench_store append --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_memory

@@ -235,6 +235,29 @@ class VerdictIn(BaseModel):
     )
 
 
+# A planar robot pose: within 10 km of the origin (as frame poses), yaw within ten radians.
+Coordinate = Annotated[float, Strict(), Field(ge=-10_000.0, le=10_000.0, allow_inf_nan=False)]
+Yaw = Annotated[float, Strict(), Field(ge=-10.0, le=10.0, allow_inf_nan=False)]
+
+
+class RobotPose(BaseModel):
+    """A planar pose of the robot's base in the world frame (z up)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    x: Coordinate = Field(description="Metres.")
+    y: Coordinate = Field(description="Metres.")
+    yaw: Yaw = Field(description="Heading about z from +x, radians.")
+
+
+class PlanIn(BaseModel):
+    """Body of `POST /v1/scenes/{scene_id}/plan`."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    robot_pose: RobotPose = Field(description="Where the robot is now.")
+
+
 class InspectionIn(BaseModel):
     """Body of `POST /v1/scenes/{scene_id}/inspections`: one fixture-centered capture."""
 
@@ -251,6 +274,11 @@ class InspectionIn(BaseModel):
     )
     capture_id: Identifier | None = Field(
         None, description="Client id of the capture (default: generated)."
+    )
+    view: RobotPose | None = Field(
+        None,
+        description="Where the robot stood for the capture (default: the locked view when the "
+        "fixture is the plan's target). A failed capture excludes views near it.",
     )
 
     @field_validator("frames")

@@ -8,6 +8,7 @@ from core.events import Event
 from core.fixture_step import fixture_batch
 from core.geometry import Proposal, ground_detection
 from core.observation import Batch, Frame
+from core.occupancy_evidence import occupancy_evidence
 from core.params import Params
 from core.rules import PAPER_RULES, UpdateRules
 from core.state import SceneState
@@ -45,7 +46,10 @@ def decide(
                 evidence.observe(matches.get(j) or evidence.new_track(proposal), proposal)
     # 5. One existence update per track per batch (equation (3)), support parents from
     #    geometry, then lifecycle events.
-    head = [fixtures.evidence_event] if fixtures.evidence_event is not None else []
+    head: list[Event] = [fixtures.evidence_event] if fixtures.evidence_event is not None else []
+    # 6. The occupancy map A_t: the batch's depth, as free and occupied cells (section 3.2).
+    occupancy = occupancy_evidence(batch.frames, params.occupancy)
+    head += [occupancy] if occupancy is not None else []
     return [*head, *evidence.events()]
 
 

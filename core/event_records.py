@@ -22,8 +22,10 @@ from core.events import (
     FixtureEvidence,
     FixtureObserved,
     InspectionRecorded,
+    InspectionTargeted,
     ObjectAdded,
     ObjectObserved,
+    OccupancyEvidence,
     SceneCreated,
     TrackConfirmed,
     TrackDemoted,
@@ -75,6 +77,8 @@ _SINGLE_CLASS: dict[str, type[Event]] = {
         VerificationRequested,
         TrackVerified,
         InspectionRecorded,
+        OccupancyEvidence,
+        InspectionTargeted,
     )
 }
 EVENT_TYPE_NAMES: tuple[str, ...] = (*sorted(_SINGLE_CLASS), "add", "update")

@@ -16,7 +16,7 @@ from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import ConfigDict, Field
 
-from core.state import LifecycleState, Track, Vec3
+from core.state import LifecycleState, Track, Vec3, ViewPose
 
 __all__ = [
     "BaselineFrozen",
@@ -28,10 +28,12 @@ __all__ = [
     "FixtureEvidence",
     "FixtureObserved",
     "InspectionRecorded",
+    "InspectionTargeted",
     "LifecycleState",
     "ObjectAdded",
     "ObjectObserved",
     "Observation",
+    "OccupancyEvidence",
     "SceneCreated",
     "Sighting",
     "TrackAdded",
@@ -46,6 +48,7 @@ __all__ = [
     "TrackUpdated",
     "TrackVerified",
     "VerificationRequested",
+    "ViewPose",
     "VisibleMiss",
     "VoxelDetection",
 ]
@@ -153,6 +156,23 @@ class FixtureEvidence(Event):
 
     type: ClassVar[str] = "fixture_evidence"
     detections: tuple[VoxelDetection, ...]
+
+
+@dataclass(frozen=True, kw_only=True)
+class OccupancyEvidence(Event):
+    """What the batch's depth says of the occupancy map A_t (section 3.2): the cells its rays
+    crossed (free) and the cells its points in the robot's height band fell in (occupied).
+
+    Cells are flat indices `row * side + col` of the scene's grid (core/occupancy.py), sorted
+    and stored as runs: gap from the previous run's end, run length, gap, length, ...
+    """
+
+    type: ClassVar[str] = "occupancy_evidence"
+    resolution_m: float
+    side: int  # cells per side of the grid
+    free: tuple[int, ...]
+    occupied: tuple[int, ...]
+    timestamp: float  # the batch's newest frame: the scene clock
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -413,6 +433,40 @@ class InspectionRecorded(TrackEvent):
     children: tuple[str, ...]
     attempts: int
     status: Literal["completed", "abandoned"] | None
+    # Where the robot stood for the capture (the locked view, or the one the client named);
+    # a failed capture excludes views near it for this fixture (older logs: none).
+    view: Annotated[ViewPose | None, Omitted] = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class InspectionTargeted(TrackEvent):
+    """The planner locked a fixture as the inspection target (equations (4)-(6), section 3.4).
+
+    The lock holds until the fixture's next capture (completed or failed), a rejection or its
+    completion; the event says why the robot goes there: u_i with its six terms, Prox(i), the
+    score of equation (5), and the view with J and its terms (equation (6)).
+    """
+
+    type: ClassVar[str] = "inspection_targeted"
+    robot: ViewPose  # the robot's pose the plan was decided for
+    view: ViewPose  # where to stand, facing the fixture
+    pitch: float  # camera tilt at the view, radians (negative looks down)
+    uncertainty: float  # u_i
+    uncertainty_terms: Mapping[str, float]  # phi_i: existence, class, parent, position, ...
+    proximity: float  # Prox(i)
+    score: float  # 0.8 u_i + 0.2 Prox(i)
+    cost: float  # J(v, i)
+    cost_terms: Mapping[str, float]  # standoff, travel, clearance, coverage, margin
+    standoff_m: float  # d_foot(v, i)
+    travel_m: float  # D_t(v)
+    clearance_m: float  # Clr(v)
+    coverage: float  # Cov(v, i)
+    deferred: tuple[str, ...]  # fixtures ranked above it that had no feasible view
+    replaces: Annotated[str | None, Omitted] = None  # the fixture of the lock it replaces
+
+    def touched_tracks(self) -> tuple[str, ...]:
+        """None: a lock changes no track (it is planning state)."""
+        return ()
 
 
 # A positive observation of a track in a batch (isinstance accepts this union).

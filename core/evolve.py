@@ -16,8 +16,10 @@ from core.events import (
     FixtureEvidence,
     FixtureObserved,
     InspectionRecorded,
+    InspectionTargeted,
     ObjectAdded,
     ObjectObserved,
+    OccupancyEvidence,
     SceneCreated,
     TrackConfirmed,
     TrackDemoted,
@@ -29,8 +31,17 @@ from core.events import (
     VerificationRequested,
     VisibleMiss,
 )
+from core.occupancy import GridWork
 from core.params import Params
-from core.state import BaselineRecord, SceneState, Track, Vec3, VoxelKey
+from core.state import (
+    BaselineRecord,
+    InspectionLock,
+    PlanLedger,
+    SceneState,
+    Track,
+    Vec3,
+    VoxelKey,
+)
 
 Voxels = dict[VoxelKey, tuple[int, tuple[float, ...]]]
 
@@ -47,6 +58,8 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
     head_seq, next_track_number = state.head_seq, state.next_track_number
     voxels: Voxels | None = None  # copied on first use
     baselines, source_baseline = list(state.baselines), state.source_baseline
+    occupancy: GridWork | None = None  # copied on first use
+    clock, plan = state.clock, state.plan
     touched: set[str] = set()
     for event in events:
         head_seq += 1
@@ -60,6 +73,14 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 if voxels is None:
                     voxels = dict(state.voxels)
                 _add_voxel_evidence(voxels, event)
+            case OccupancyEvidence():
+                if occupancy is None:
+                    occupancy = GridWork(state.occupancy)
+                occupancy.apply(event.side, event.free, event.occupied, params.occupancy)
+                clock = event.timestamp if clock is None else max(clock, event.timestamp)
+            case InspectionTargeted():
+                lock = InspectionLock(event.track_id, event.view, event.pitch, head_seq)
+                plan = PlanLedger(lock, plan.locks + 1, plan.failed_views, plan.failed_at_lock)
             case BaselineFrozen():
                 record = BaselineRecord(event.version, head_seq, event.sha256, event.fixture_ids)
                 baselines.append(record)
@@ -107,6 +128,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 tracks[event.track_id] = tracks[event.track_id].evolved(
                     inspection_status=event.status, inspection_attempts=event.attempts
                 )
+                plan = _after_capture(plan, event)
             case _:
                 raise ValueError(f"no evolve rule for event {type(event).__name__}")
     return SceneState(
@@ -118,7 +140,25 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
         voxels=state.voxels if voxels is None else voxels,
         baselines=tuple(baselines),
         source_baseline=source_baseline,
+        occupancy=state.occupancy if occupancy is None else occupancy.frozen(),
+        clock=clock,
+        plan=plan,
     ).with_arrays_from(state, touched)
+
+
+def _after_capture(plan: PlanLedger, event: InspectionRecorded) -> PlanLedger:
+    """A capture releases a lock on its fixture; a failed one records its view and the time of
+    the failure (in locks) for the retry cooldown."""
+    lock = plan.lock
+    if lock is not None and lock.fixture_id == event.fixture_id:
+        lock = None
+    if event.outcome == "completed":
+        return PlanLedger(lock, plan.locks, plan.failed_views, plan.failed_at_lock)
+    failed_views = dict(plan.failed_views)
+    if event.view is not None:
+        failed_views[event.fixture_id] = (*failed_views.get(event.fixture_id, ()), event.view)
+    failed_at = {**plan.failed_at_lock, event.fixture_id: plan.locks}
+    return PlanLedger(lock, plan.locks, failed_views, failed_at)
 
 
 def _add_voxel_evidence(voxels: Voxels, event: FixtureEvidence) -> None:

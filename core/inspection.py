@@ -20,7 +20,7 @@ from core.geometry import Proposal
 from core.masks import Mask, mask_iou
 from core.observation import Frame
 from core.params import Params
-from core.state import InspectionStatus, SceneState, Track
+from core.state import InspectionStatus, SceneState, Track, ViewPose
 from core.support import SupportSurface, support_of
 from core.transitions import added_object, confirmed, observed_object, vec3
 from core.visibility import samples_passed
@@ -64,9 +64,17 @@ def decide_inspection(
     frames: Sequence[Frame],
     fixture_verified: bool | None,
     params: Params | None = None,
+    view: ViewPose | None = None,
 ) -> list[Event]:
-    """Children of the fixture (add/confirm/reparent or update) and the capture's ledger entry."""
+    """Children of the fixture (add/confirm/reparent or update) and the capture's ledger entry.
+
+    The capture's view is the one the client names, else the locked view when the fixture is
+    the locked target: a failed capture excludes views near it (section 3.4).
+    """
     params = params or state.params
+    lock = state.plan.lock
+    if view is None and lock is not None and lock.fixture_id == fixture_id:
+        view = lock.view
     fixture = state.tracks.get(fixture_id)
     if fixture is None:
         raise UnknownTrack(f"fixture {fixture_id!r} does not exist", "fixture_id")
@@ -114,6 +122,7 @@ def decide_inspection(
         children=tuple(children),
         attempts=attempts,
         status=status,
+        view=view,
     )
     return [*events, record]
 

@@ -288,6 +288,188 @@ class InspectionParams:
 
 
 @dataclass(frozen=True)
+class OccupancyParams:
+    """The 2D occupancy map A_t (section 3.1: "range measurements used to maintain a 2D
+    occupancy map"; section 3.2: "range sensing incrementally expands the known region of A_t").
+
+    The paper gives no grid parameters; these are ours. The world frame has z up and the floor
+    at z = 0 (the simulator and a robot's map frame do). Each batch's depth says, per cell,
+    "occupied" (a point in the robot's height band fell in it) or "free" (a ray to a measured
+    point crossed it); occupied wins within a batch. Folded into an integer per cell:
+    occupied adds `occupied_hit`, free subtracts `free_hit`, clamped to
+    [`min_value`, `max_value`]; a cell is occupied while its value is above 0, free otherwise,
+    and unknown until some batch spoke of it. Integers, so a replay is exact.
+    """
+
+    __pydantic_config__ = _CHECKED
+    # 5 cm: the fixture voxel size; a 20 m x 20 m map is 400 x 400 cells.
+    resolution_m: Annotated[float, Field(ge=0.02, le=1.0)] = 0.05
+    # The map covers |x|, |y| <= this around the world origin; evidence beyond it is dropped
+    # (a hostile pose 10 km away must not allocate a continent of cells).
+    half_extent_m: Annotated[float, Field(ge=1.0, le=200.0)] = 100.0
+    # The robot's height band: points between these heights above the floor are obstacles;
+    # below the band is floor (free, not an obstacle: depth noise on the floor is a few cm),
+    # above it the robot passes under (ceilings, hanging lamps). 1.5 m: a service robot's head.
+    band_min_z_m: Annotated[float, Field(ge=-1.0, le=5.0)] = 0.10
+    band_max_z_m: Annotated[float, Field(ge=0.0, le=5.0)] = 1.5
+    # Valid depth range for the map (the visibility gate's Kinect-class range).
+    min_range_m: Metres = 0.3
+    max_range_m: PositiveMetres = 6.0
+    # Every 4th pixel in each direction (as the fixture voxel map samples its masks).
+    pixel_stride: Annotated[int, Field(ge=1, le=64)] = 4
+    # Rays: one per bearing bin from the camera, as a laser scan from depth; a bin is clear up
+    # to its nearest obstacle point, or, with none, to its farthest floor point. Bins this
+    # wide leave no gap between rays wider than half a cell at the maximum range.
+    ray_bins_per_cell_at_max_range: Annotated[int, Field(ge=1, le=16)] = 2
+    # Stop the free ray this short of the obstacle (its cell is occupied, not free).
+    ray_stop_short_m: Metres = 0.05
+    # The robot stood where its camera was: the cells within this of the camera's floor
+    # projection are free (the planner's robot radius; 0 for a camera not on the robot).
+    footprint_radius_m: Annotated[float, Field(ge=0.0, le=5.0)] = 0.25
+    occupied_hit: Annotated[int, Field(ge=1, le=16)] = 2
+    free_hit: Annotated[int, Field(ge=1, le=16)] = 1
+    # -1: one occupied batch makes any free cell occupied (obstacles appear at once, safe for
+    # navigation); +6: a wall seen in 3 batches needs 6 batches of free rays through it to clear.
+    min_value: Annotated[int, Field(ge=-100, le=0)] = -1
+    max_value: Annotated[int, Field(ge=1, le=100)] = 6
+
+    def __post_init__(self) -> None:
+        if self.band_min_z_m >= self.band_max_z_m:
+            raise ValueError("band_min_z_m must be below band_max_z_m")
+        if self.min_range_m >= self.max_range_m:
+            raise ValueError("min_range_m must be below max_range_m")
+        if 2 * self.half_extent_m / self.resolution_m > 8192:
+            raise ValueError("the map may have at most 8192 cells per side (half_extent_m)")
+
+
+@dataclass(frozen=True)
+class UncertaintyParams:
+    """Fixture uncertainty u_i = w . phi_i, equation (4) (section 3.4).
+
+    The weights are the paper's. Each phi term increases from 0 to 1; the paper names the terms
+    and two transforms (existence ambiguity 4p(1-p); class uncertainty from normalized class
+    entropy and score-margin ambiguity) and leaves the rest open: the transforms below are
+    ours, fixed here before any evaluation.
+    """
+
+    __pydantic_config__ = _CHECKED
+    # w = (.20, .30, .10, .15, .10, .15) over existence, class, parent, position, age, confirmation
+    weight_existence: Fraction = 0.20
+    weight_class: Fraction = 0.30
+    weight_parent: Fraction = 0.10
+    weight_position: Fraction = 0.15
+    weight_age: Fraction = 0.10
+    weight_confirmation: Fraction = 0.15
+    # Class: share * H(p_cls) / log K + (1 - share) * clip(1 - m / class_margin_full, 0, 1), with
+    # K the number of classes (the taxonomy, at least) and m the mean top-vs-second score margin
+    # of the supporting batches (what the consensus gate reads). Equal shares; a margin of twice
+    # the consensus gate's (2 x 0.08) is unambiguous.
+    class_entropy_share: Fraction = 0.5
+    class_margin_full: Annotated[float, Field(gt=0.0, le=1.0)] = 0.16
+    # Parent: normalized entropy of p_parent (0 with one candidate or none: a fixture stands on
+    # the floor).
+    # Position: the planar spread of the recent centers, sqrt(S_xx + S_yy) / this, clipped
+    # (1 with fewer than two centers): 0.30 m is a third of a table's width.
+    position_sigma_full_m: PositiveMetres = 0.30
+    # Age: (scene clock - tau_i) / this, clipped; the scene clock is the newest batch time.
+    age_full_s: Annotated[float, Field(gt=0.0, le=1e9)] = 600.0
+    # Confirmation: 1 at the fixture confirmation minimum of supporting batches, falling
+    # linearly to 0 at this many; 0 for a pinned fixture (confirmed in an earlier session).
+    confirmation_batches_full: Annotated[int, Field(ge=1, le=100_000)] = 12
+
+    @property
+    def weights(self) -> tuple[float, float, float, float, float, float]:
+        """w of equation (4), in the paper's order."""
+        return (
+            self.weight_existence,
+            self.weight_class,
+            self.weight_parent,
+            self.weight_position,
+            self.weight_age,
+            self.weight_confirmation,
+        )
+
+    def __post_init__(self) -> None:
+        if abs(sum(self.weights) - 1.0) > 1e-9:
+            raise ValueError("the six weights of equation (4) must sum to 1")
+
+
+@dataclass(frozen=True)
+class PlannerParams:
+    """Target selection (equation (5)) and inspection views (equation (6)), section 3.4."""
+
+    __pydantic_config__ = _CHECKED
+    # Equation (5): argmax 0.8 u_i + 0.2 Prox(i), Prox(i) = clip(1 - d_i / 8 m, 0, 1) with d_i
+    # the planar distance from the robot to the fixture's center (ours: the paper says "a
+    # clipped proximity score that decreases to zero over 8 m").
+    uncertainty_weight: Fraction = 0.8
+    proximity_weight: Fraction = 0.2
+    proximity_range_m: PositiveMetres = 8.0
+    # Equation (6): J = |d_foot - d_pref| + 0.08 D_t + (-0.20) min(Clr, 1 m) + 4 (1 - Cov)
+    #                   + P_margin.
+    preferred_standoff_m: PositiveMetres = 0.90  # d_pref
+    travel_weight: Weight = 0.08
+    clearance_weight: Weight = 0.20
+    clearance_cap_m: PositiveMetres = 1.0
+    coverage_weight: Weight = 4.0
+    # P_margin (ours; the paper names it only): this weight times how far the support's
+    # farthest corner intrudes into the image margin, as a share of the margin (0 when every
+    # corner is inside the margin, the full weight at the border or beyond).
+    margin_penalty_weight: Weight = 1.0
+    # Standoff: the view's planar distance to the support footprint (ours, around d_pref).
+    min_standoff_m: Metres = 0.40
+    max_standoff_m: PositiveMetres = 1.60
+    # The robot: its radius inflates the map's occupied cells (reachability and view cells).
+    robot_radius_m: Metres = 0.25
+    # The camera of the inspection view (a Kinect-class sensor on a head at 1.3 m): its
+    # horizontal and vertical field of view, range, and the tilt range of the head; the view
+    # looks at the support's center, its tilt clipped to the range.
+    camera_height_m: PositiveMetres = 1.3
+    horizontal_fov_deg: Annotated[float, Field(gt=1.0, lt=180.0)] = 62.0
+    vertical_fov_deg: Annotated[float, Field(gt=1.0, lt=180.0)] = 49.0
+    min_view_range_m: Metres = 0.3
+    max_view_range_m: PositiveMetres = 4.0
+    min_pitch_deg: Annotated[float, Field(ge=-90.0, le=90.0)] = -60.0
+    max_pitch_deg: Annotated[float, Field(ge=-90.0, le=90.0)] = 10.0
+    # Image margin: the share of the half-image at each border a support point must stay clear
+    # of to count as covered; the support's center must too (the image-margin constraint).
+    image_margin: Annotated[float, Field(ge=0.0, lt=1.0)] = 0.05
+    # Projected coverage Cov: the share of an n x n grid of points on the support's top that
+    # are in front, in range, inside the image minus the margin and in line of sight; a view
+    # needs at least `min_coverage`.
+    support_samples_per_axis: Annotated[int, Field(ge=1, le=16)] = 4
+    min_coverage: Fraction = 0.5
+    # Line of sight on the map: occupied cells block it, except the fixture's own footprint
+    # grown by this (the fixture is itself occupied).
+    own_footprint_margin_m: Metres = 0.10
+    # Travel distance D_t: Dijkstra over 8-connected traversable cells of a grid this many
+    # map cells wide (2: 10 cm), a cell traversable when all its map cells are known free and
+    # farther than the robot radius from an occupied cell. Views are evaluated at its cells.
+    travel_cell_factor: Annotated[int, Field(ge=1, le=8)] = 2
+    # At most this many candidate views per fixture (a deterministic stride over the ring).
+    max_candidate_views: Annotated[int, Field(ge=1, le=100_000)] = 400
+    # A candidate within this of a view that failed for the fixture is excluded.
+    failed_view_radius_m: Metres = 0.30
+    # Retry cooldown (ours): a fixture whose capture failed waits until this many other targets
+    # have been locked, unless nothing else is left to do (no feasible target, no frontier).
+    retry_cooldown_locks: Annotated[int, Field(ge=0, le=1000)] = 1
+    # Frontiers (Yamauchi): 8-connected clusters of free cells bordering unknown ones, of at
+    # least this many cells (0.25 m of frontier at 5 cm); the goal is the reachable frontier
+    # nearest by travel, at least `min_frontier_travel_m` away (the robot has seen what is
+    # around its feet), at its reachable cell nearest the cluster's centroid.
+    min_frontier_cells: Annotated[int, Field(ge=1, le=1_000_000)] = 5
+    min_frontier_travel_m: Metres = 0.30
+
+    def __post_init__(self) -> None:
+        if self.min_standoff_m >= self.max_standoff_m:
+            raise ValueError("min_standoff_m must be below max_standoff_m")
+        if self.min_view_range_m >= self.max_view_range_m:
+            raise ValueError("min_view_range_m must be below max_view_range_m")
+        if self.min_pitch_deg > self.max_pitch_deg:
+            raise ValueError("min_pitch_deg must not exceed max_pitch_deg")
+
+
+@dataclass(frozen=True)
 class Params:
     """The whole parameter tree of one scene."""
 
@@ -300,6 +482,9 @@ class Params:
     lifecycle: LifecycleParams = field(default_factory=LifecycleParams)
     fixtures: FixtureParams = field(default_factory=FixtureParams)
     inspection: InspectionParams = field(default_factory=InspectionParams)
+    occupancy: OccupancyParams = field(default_factory=OccupancyParams)
+    uncertainty: UncertaintyParams = field(default_factory=UncertaintyParams)
+    planner: PlannerParams = field(default_factory=PlannerParams)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able dict (tuples become lists)."""

@@ -19,6 +19,7 @@ from service.routes import (
     events,
     graph,
     inspections,
+    plan,
     scenes,
     tracks,
     verifications,
@@ -62,7 +63,8 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     install_security(app, container)
     install_openapi(app)  # hosts, CORS, tokens, rate limits: before the body limit
     app.add_middleware(UnexpectedErrors)  # outermost of ours: a 500 keeps the connection
-    for module in (scenes, batches, graph, events, tracks, verifications, baselines, inspections):
+    routers = (scenes, batches, graph, events, tracks, verifications, baselines, inspections, plan)
+    for module in routers:
         app.include_router(module.router)
 
     @app.get("/healthz", response_model=Health, tags=["health"])

@@ -15,6 +15,9 @@ from api_schema import (
 )
 from core.events import InspectionRecorded
 from core.inspection import decide_inspection
+from core.planner import queue_status, unresolved_fixtures
+from core.state import ViewPose
+from core.uncertainty import fixture_uncertainty
 from service.codec import decode_frames
 from service.commands import run_command
 from service.deps import ContainerDep, SceneDep, StatesDep
@@ -28,11 +31,12 @@ def post_inspection(scene: SceneDep, body: InspectionIn, container: ContainerDep
     """Ground the primary view's objects on the fixture, attach them as its children, record the capture."""
     frames = decode_frames(body.frames)  # 422 naming the field; nothing is appended
     capture_id = body.capture_id or f"cap-{uuid.uuid4().hex[:12]}"
+    view = None if body.view is None else ViewPose(x=body.view.x, y=body.view.y, yaw=body.view.yaw)
     events, appended = run_command(
         container,
         scene.id,
         lambda head: decide_inspection(
-            head, capture_id, body.fixture_id, frames, body.fixture_verified
+            head, capture_id, body.fixture_id, frames, body.fixture_verified, view=view
         ),
     )
     record = events[-1]
@@ -53,22 +57,22 @@ def list_inspections(scene: SceneDep, container: ContainerDep) -> InspectionList
 
 @router.get("/inspection-queue", response_model=InspectionQueue)
 def inspection_queue(scene: SceneDep, states: StatesDep) -> InspectionQueue:
-    """Confirmed fixtures of the inspection taxonomy whose close-range inspection is unresolved."""
+    """Confirmed fixtures of the inspection taxonomy whose close-range inspection is unresolved,
+    most uncertain first (u_i, equation (4)); Q_t is those `queued`."""
     state = states.state(scene.id)
-    taxonomy = set(state.params.fixtures.inspection_taxonomy)
-    return InspectionQueue(
-        fixtures=[
+    items = []
+    for fixture in unresolved_fixtures(state):
+        u = fixture_uncertainty(fixture, state.clock, state.params)
+        items.append(
             InspectionQueueItem(
-                fixture_id=t.track_id,
-                label=t.label,
-                p_exist=t.p_exist,
-                center=list(t.center),
-                attempts=t.inspection_attempts,
+                fixture_id=fixture.track_id,
+                label=fixture.label,
+                p_exist=fixture.p_exist,
+                center=list(fixture.center),
+                attempts=fixture.inspection_attempts,
+                status=queue_status(state, fixture.track_id),
+                uncertainty=u.value,
             )
-            for t in (state.tracks[i] for i in sorted(state.tracks))
-            if t.kind == "fixture"
-            and t.lifecycle == "confirmed"
-            and t.label in taxonomy
-            and t.inspection_status is None
-        ]
-    )
+        )
+    items.sort(key=lambda item: (-item.uncertainty, item.fixture_id))
+    return InspectionQueue(fixtures=items)

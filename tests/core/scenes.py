@@ -6,6 +6,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from core.events import Event, OccupancyEvidence
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
 
@@ -91,3 +92,9 @@ def scene_batch(
         detection(labels[n], masks[n], embeddings.get(n)) for n in sorted(names) if masks[n].any()
     ]
     return Batch(batch_id, (frame(f"{batch_id}-f0", depth, detections, pose),))
+
+
+def track_events(events: Iterable[Event]) -> list[Event]:
+    """The events of a batch about tracks: its occupancy map evidence set aside (a camera
+    turned about its y axis sees a floor and walls in the world's height band)."""
+    return [e for e in events if not isinstance(e, OccupancyEvidence)]

@@ -14,7 +14,7 @@ from core.masks import Mask
 from core.observation import Batch
 from core.params import Params
 from core.state import SceneState
-from tests.core.scenes import look_pose, scene_batch
+from tests.core.scenes import look_pose, scene_batch, track_events
 
 MUG = {"mug_1": ((0.2, 0.1, 2.0), 0.1)}
 
@@ -25,7 +25,7 @@ def run(state: SceneState, batches: Iterable[Batch]) -> tuple[SceneState, list[l
     for batch in batches:
         events = decide(state, batch)
         state = fold(state, events)
-        per_batch.append(events)
+        per_batch.append(track_events(events))
     return state, per_batch
 
 
@@ -219,7 +219,7 @@ def test_clamp_keeps_a_long_seen_object_removable() -> None:
 
 def test_mask_with_too_little_valid_depth_is_rejected() -> None:
     batch = scene_batch("b0", {"mug_1": ((0.2, 0.1, 2.0), 0.02)})  # a few pixels only
-    assert decide(SceneState(), batch) == []
+    assert track_events(decide(SceneState(), batch)) == []
 
 
 def test_boundary_leak_does_not_drag_the_center() -> None:
@@ -241,7 +241,7 @@ def test_boundary_leak_does_not_drag_the_center() -> None:
             ),
         ),
     )
-    events = decide(SceneState(), leaky)
+    events = track_events(decide(SceneState(), leaky))
     center = events[0].details()["observations"][0]["center"]
     assert np.count_nonzero(leaked) > 2 * np.count_nonzero(mask) - 10
     assert math.dist(center, (0.2, 0.1, 1.93)) < 0.03
@@ -306,11 +306,12 @@ def test_without_persistent_identity_a_returning_object_gets_a_new_identity() ->
     state = fold(
         state, decide(state, at_time(scene_batch("away", {}, pose=away), 2.0), rules=rules)
     )
-    events = decide(state, at_time(scene_batch("back", MUG), 5.0), rules=rules)
+    events = track_events(decide(state, at_time(scene_batch("back", MUG), 5.0), rules=rules))
     assert (events[0].type, events[0].track_id) == ("add", "trk-000002")
     assert [(e.type, e.details()["evidence"]) for e in events[1:]] == [("update", "visible_miss")]
     # with the paper's rules the same return keeps the identity
-    assert decide(state, at_time(scene_batch("back", MUG), 5.0))[0].track_id == "trk-000001"
+    kept = track_events(decide(state, at_time(scene_batch("back", MUG), 5.0)))
+    assert kept[0].track_id == "trk-000001"
 
 
 def test_an_append_only_memory_never_removes() -> None:

@@ -17,7 +17,15 @@ from core.state import SceneState
 from core.visibility import observable, samples_passed
 from sim.world import object_on
 from tests.core.rendered import ROOM, TABLE, TABLE_VIEWS, batches, frame
-from tests.core.scenes import INTRINSICS, detection, look_pose, paint_box, scene_batch, wall
+from tests.core.scenes import (
+    INTRINSICS,
+    detection,
+    look_pose,
+    paint_box,
+    scene_batch,
+    track_events,
+    wall,
+)
 from tests.core.scenes import frame as analytic_frame
 
 MUG = {"mug_1": ((0.2, 0.1, 2.0), 0.1)}
@@ -28,7 +36,7 @@ def run(state: SceneState, batch_list: list[Batch]) -> tuple[SceneState, list[li
     for batch in batch_list:
         events = decide(state, batch)
         state = fold(state, events)
-        per_batch.append(events)
+        per_batch.append(track_events(events))
     return state, per_batch
 
 
@@ -91,7 +99,7 @@ def test_a_sliver_at_the_image_border_is_not_a_miss() -> None:
         state.params,
         visibility=replace(params, min_expected_image_fraction=0.0, min_in_image_share=0.0),
     )
-    events = decide(state, sliver, anything)
+    events = track_events(decide(state, sliver, anything))
     assert [e.details().get("evidence") for e in events] == ["visible_miss"]
 
 
@@ -100,10 +108,10 @@ def test_the_free_space_rule_counts_a_miss_only_where_depth_shows_free_space() -
     free_space = UpdateRules(miss_evidence="free_space")
     # Undetected but still there: depth shows its surface, not free space.
     still_there = scene_batch("undetected", MUG, detect=set())
-    assert decide(state, still_there, rules=free_space) == []
-    assert decide(state, still_there)  # the paper's gate counts it as a visible miss
+    assert track_events(decide(state, still_there, rules=free_space)) == []
+    assert track_events(decide(state, still_there))  # the paper's gate: a visible miss
     # Gone: the wall behind it shows free space where it was.
-    gone = decide(state, scene_batch("gone", {}), rules=free_space)
+    gone = track_events(decide(state, scene_batch("gone", {}), rules=free_space))
     assert [e.details()["evidence"] for e in gone] == ["visible_miss"]
 
 
@@ -159,7 +167,7 @@ def test_a_batch_with_full_frame_masks_is_bounded_by_sampling() -> None:
     mask = np.ones((INTRINSICS.height, INTRINSICS.width), dtype=bool)
     big = Detection("rug", 0.9, "object", Mask.from_array(mask))
     batch = Batch("b", (analytic_frame("f", depth, [big]),))
-    events = decide(SceneState(), batch)
+    events = track_events(decide(SceneState(), batch))
     observation = events[0].details()["observations"][0]
     assert abs(observation["valid_pixels"] - mask.size) <= mask.size * 0.01
 

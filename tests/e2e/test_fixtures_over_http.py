@@ -168,10 +168,11 @@ def test_inspection_attaches_three_children_and_later_moves_keep_their_identity(
     client, worker, _ = api
     scene_id = discovered(client, worker)
     ids = fixture_ids(client, scene_id)
-    assert [
-        f["fixture_id"]
-        for f in client.get(f"/v1/scenes/{scene_id}/inspection-queue").json()["fixtures"]
-    ] == sorted(ids.values())
+    queue = client.get(f"/v1/scenes/{scene_id}/inspection-queue").json()["fixtures"]
+    # Both fixtures, most uncertain first (u_i of equation (4)).
+    assert sorted(f["fixture_id"] for f in queue) == sorted(ids.values())
+    uncertainties = [f["uncertainty"] for f in queue]
+    assert uncertainties == sorted(uncertainties, reverse=True)
     world = ROOM.without("mug")
     for box in FINE:
         world = world.with_object(box)
