@@ -9,6 +9,7 @@ from typing import Any
 
 import pytest
 
+from evaluation.cli import loadable
 from evaluation.report import write_report
 from evaluation.tables import table
 from service.cli import main
@@ -113,3 +114,19 @@ def test_eval_runs_every_method_on_one_given_parameter_set_and_records_it(
     assert main([*common, "--methods", "PBD-AG", "--params", json.dumps(good)]) == 0
     assert json.loads((tmp_path / "results.json").read_text())["params"] == good
     assert '"min_expected_image_fraction": 0.002' in (tmp_path / "table.md").read_text()
+
+
+def test_a_shipped_world_whose_recording_is_absent_is_left_out_and_a_given_one_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    good = tmp_path / "good.yaml"
+    good.write_text((SCENARIOS_DIR / "hotel-suite.yaml").read_text())
+    missing = tmp_path / "missing.yaml"
+    text = (SCENARIOS_DIR / "kitchen-real.yaml").read_text()
+    missing.write_text(text.replace("../shared/data/7scenes-kitchen", "no/such/recording"))
+    # As the shipped defaults: left out with a note naming the world and the field.
+    assert loadable(None, [str(good), str(missing)]) == [good]
+    assert "leaving out missing.yaml: background.path: no folder" in capsys.readouterr().err
+    # Named by the user: an error, nothing run.
+    assert loadable([good, missing], []) is None
+    assert "background.path: no folder" in capsys.readouterr().err
