@@ -1,4 +1,4 @@
-"""`pbdag eval dynamic|fixtures`: the paper's protocols on shipped or custom scenario files."""
+"""`pbdag eval dynamic|fixtures|active`: the paper's protocols on shipped or custom scenario files."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ SHIPPED = [
     "busy-living-room.yaml",
 ]
 DEFAULT_SCENARIOS = {"dynamic": SHIPPED, "fixtures": SHIPPED}
+ACTIVE_SHIPPED = ["active/flat.yaml", "active/suite.yaml", "active/floor.yaml"]
 
 
 def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -63,6 +64,123 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
         )
         parser.add_argument("--quiet", action="store_true", help="no progress bar")
         parser.set_defaults(handler=run)
+    active = protocols.add_parser(
+        "active",
+        help="autonomous construction from an empty map: coarse and fine P/R/F1 (Table 3), "
+        "and the paired acquisition orders under inspection budgets",
+    )
+    active.add_argument(
+        "--scenario", nargs="+", type=Path, help="active world YAML files (default: the shipped)"
+    )
+    active.add_argument("--seeds", nargs="+", type=int, default=[7, 17, 27])
+    active.add_argument("--out", type=Path, default=Path("evaluation/results") / "active")
+    active.add_argument(
+        "--orders",
+        nargs="+",
+        default=["pbdag", "nearest", "fifo", "random"],
+        help="acquisition orders (pbdag, nearest, fifo, random; default: all)",
+    )
+    active.add_argument(
+        "--budgets",
+        nargs="+",
+        type=int,
+        default=[2, 4, 6, 8],
+        help="inspection budgets of the paired comparison",
+    )
+    active.add_argument("--keyframes", type=int, default=600, help="coarse-discovery budget")
+    active.add_argument("--via-service", metavar="URL", help="run through this service's API")
+    active.add_argument("--token", help="bearer token for --via-service (default: $PBDAG_TOKEN)")
+    active.add_argument("--params", metavar="JSON", help="overrides of core/params.py")
+    active.add_argument("--quiet", action="store_true", help="no progress lines")
+    active.set_defaults(handler=run_active)
+
+
+def run_active(args: argparse.Namespace) -> int:
+    """Run the active protocol and write its report."""
+    import json
+    import os
+    import sys
+
+    import httpx
+
+    from core.errors import InvalidParams
+    from core.params import Params
+    from evaluation.active import ORDERS, run_row, write
+    from evaluation.report import code_version
+    from sim.rollout import RolloutResult, RolloutSettings
+    from sim.scenario import ScenarioError
+
+    def fail(message: str) -> int:
+        print(f"pbdag eval active: {message}", file=sys.stderr)
+        return 2
+
+    unknown = [o for o in args.orders if o not in ORDERS]
+    if unknown:
+        return fail(f"--orders: unknown {', '.join(unknown)} (known: {', '.join(ORDERS)})")
+    if any(b < 1 for b in args.budgets):
+        return fail("--budgets: every budget must be at least 1 inspection")
+    if args.keyframes < 1:
+        return fail("--keyframes: must be at least 1")
+    scenarios = args.scenario or [SCENARIOS_DIR / name for name in ACTIVE_SHIPPED]
+    for path in scenarios:
+        if not Path(path).is_file():
+            return fail(f"--scenario: {path} is not a file")
+    overrides: dict[str, object] = {}
+    if args.params:
+        try:
+            overrides = json.loads(args.params)
+            if not isinstance(overrides, dict):
+                raise ValueError("expected a JSON object")
+            Params.from_dict(overrides)
+        except (ValueError, InvalidParams) as error:
+            return fail(f"--params: {error}")
+    token = args.token or os.environ.get("PBDAG_TOKEN")
+    client = (
+        httpx.Client(
+            base_url=args.via_service.rstrip("/"),
+            timeout=60.0,
+            headers={"Authorization": f"Bearer {token}"} if token else {},
+        )
+        if args.via_service
+        else None
+    )
+    settings = RolloutSettings(keyframe_budget=args.keyframes)
+    rows: list[dict[str, object]] = []
+    results: list[RolloutResult] = []
+    try:
+        for path in scenarios:
+            for seed in args.seeds:
+                for order in args.orders:
+                    try:
+                        row, result = run_row(
+                            Path(path),
+                            seed,
+                            order,
+                            params=overrides,
+                            client=client,
+                            settings=settings,
+                        )
+                    except ScenarioError as error:
+                        return fail(f"--scenario: {path}: {error}")
+                    except httpx.HTTPError as error:
+                        return fail(f"--via-service: {error}")
+                    rows.append(row)
+                    results.append(result)
+                    if not args.quiet:
+                        print(
+                            f"{row['scenario']} s{seed} {order}: coarse F1 "
+                            f"{row['coarse']['f1']:.3f}, fine F1 {row['fine']['f1']:.3f}, "
+                            f"{row['keyframes']} keyframes, {len(row['inspections'])} "
+                            f"inspections, {row['seconds']:.0f} s",
+                            flush=True,
+                        )
+    finally:
+        if client is not None:
+            client.close()
+    written = write(rows, results, args.out, args.seeds, args.budgets, overrides, code_version())
+    for written_path in written:
+        print(f"wrote {written_path}")
+    return 0
 
 
 def run(args: argparse.Namespace) -> int:
