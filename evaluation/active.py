@@ -128,6 +128,71 @@ def fine_scores(
     )
 
 
+def fine_shortfalls(result: RolloutResult) -> list[str]:
+    """Why each true fine object is not matched, and what each unmatched published object is,
+    from the memory's tracks (published or not) near the object."""
+    predicted = nodes(result.final_graph)
+    coarse = fixture_scores(result.truth_fixtures, predicted, COARSE_MATCH_M)
+    inspected = {c.fixture_id for c in result.captures if c.outcome == "completed"}
+    objects = [t for t in result.final_tracks if t.kind == "object"]
+    matched_tracks: set[str] = set()
+    lines: list[str] = []
+    for truth in truth_objects(result):
+        fixture = coarse.fixture_map.get(truth.parent)
+        near = sorted(
+            (math.dist(t.center, truth.center), t)
+            for t in objects
+            if math.dist(t.center, truth.center) < FINE_MATCH_M
+        )
+        good = [
+            t
+            for _, t in near
+            if t.label == truth.label
+            and t.state == "confirmed"
+            and t.parent == fixture
+            and fixture is not None
+        ]
+        if good:
+            matched_tracks.add(good[0].track_id)
+            continue
+        where = (
+            f"its fixture {truth.parent} not found"
+            if fixture is None
+            else f"its fixture {truth.parent} = {fixture} "
+            + ("inspected" if fixture in inspected else "never inspected")
+        )
+        same = [t for _, t in near if t.label == truth.label]
+        if same:
+            t = same[0]
+            if t.state != "confirmed":
+                why = (
+                    f"{t.track_id} {t.state} after {t.visible_misses} visibility-admissible misses"
+                )
+            else:
+                why = f"{t.track_id} published on {t.parent}, not on {fixture}"
+        elif near:
+            t = near[0][1]
+            why = f"seen as {t.label} ({t.track_id}, {t.state})"
+        else:
+            why = "never grounded within 0.5 m"
+        lines.append(f"missed {truth.object_id} ({truth.label}): {why}; {where}")
+    for node in predicted:
+        if node.kind != "object" or node.track_id in matched_tracks:
+            continue
+        twin = [
+            t
+            for t in truth_objects(result)
+            if t.label == node.label and math.dist(t.center, node.center) < FINE_MATCH_M
+        ]
+        kind = (
+            f"a duplicate of {twin[0].object_id}"
+            if twin
+            else "no true object of its class within 0.5 m"
+        )
+        lines.append(f"false positive {node.track_id} ({node.label}, on {node.parent}): {kind}")
+    return lines
+
+
 def nodes(graph: Sequence[Node]) -> list[PredictedNode]:
     return [PredictedNode(n.track_id, n.label, n.center, n.parent, n.kind) for n in graph]
 
@@ -196,6 +261,7 @@ def run_row(
             {"fixture_id": c.fixture_id, "outcome": c.outcome, "view": list(c.view)}
             for c in result.captures
         ],
+        "fine_shortfalls": fine_shortfalls(result),
         "keyframes": len(result.keyframes),
         "path_length_m": result.path_length_m,
         "travel_at_keyframe": [k[2] for k in result.keyframes],
@@ -309,6 +375,24 @@ def text(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int], header: str)
         "",
         paired_table(rows, budgets),
     ]
+    out += ["## PBD-AG's fine shortfalls, with their traces", ""]
+    categories: dict[str, int] = {}
+    for r in rows:
+        if r["order"] != "pbdag":
+            continue
+        for line in r["fine_shortfalls"]:
+            key = _category(line)
+            categories[key] = categories.get(key, 0) + 1
+    out += [
+        f"- {name}: {count}" for name, count in sorted(categories.items(), key=lambda kv: -kv[1])
+    ]
+    out.append("")
+    for r in rows:
+        if r["order"] == "pbdag" and r["fine_shortfalls"]:
+            out.append(f"**{r['scenario']} seed {r['seed']}**")
+            out.append("")
+            out += [f"- {line}" for line in r["fine_shortfalls"]]
+            out.append("")
     out += ["## Rollouts", ""]
     out += [
         "| world | seed | order | keyframes | inspections (completed) | path [m] | planner ms "
@@ -325,6 +409,21 @@ def text(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int], header: str)
             f"{', '.join(r['unresolved_at_end']) or '-'} |"
         )
     return "\n".join(out) + "\n"
+
+
+def _category(line: str) -> str:
+    """The kind of a shortfall line, for the summary."""
+    if line.startswith("false positive"):
+        return "false positive: duplicate" if "duplicate" in line else "false positive: other"
+    for needle, name in (
+        ("visibility-admissible misses", "missed: grounded, then not published (misses)"),
+        ("published on", "missed: published on another fixture"),
+        ("seen as", "missed: seen as another class"),
+        ("never grounded", "missed: never grounded"),
+    ):
+        if needle in line:
+            return name
+    return "other"
 
 
 def map_figure(result: RolloutResult, path: Path) -> Path:

@@ -90,6 +90,19 @@ class Node:
 
 
 @dataclass(frozen=True)
+class TrackSummary:
+    """Any track of the memory, published or not (for the traces of shortfalls)."""
+
+    track_id: str
+    label: str
+    kind: str
+    state: str
+    center: tuple[float, float, float]
+    parent: str | None
+    visible_misses: int
+
+
+@dataclass(frozen=True)
 class PlanStep:
     """The part of a plan the robot acts on."""
 
@@ -111,6 +124,7 @@ class Memory(Protocol):
         self, capture_id: str, fixture_id: str, frames: list[dict[str, Any]], view: ViewPose
     ) -> str: ...
     def graph(self) -> list[Node]: ...
+    def tracks(self) -> list[TrackSummary]: ...
     def occupancy(self) -> dict[str, Any]: ...
     def queue(self) -> list[str]: ...
 
@@ -171,6 +185,14 @@ class InProcessMemory:
             Node(t.track_id, t.label, t.kind, t.center, t.parent)
             for t in (self.state.tracks[i] for i in sorted(self.state.tracks))
             if is_published(t)
+        ]
+
+    def tracks(self) -> list[TrackSummary]:
+        return [
+            TrackSummary(
+                t.track_id, t.label, t.kind, t.lifecycle, t.center, t.parent, t.visible_misses
+            )
+            for t in (self.state.tracks[i] for i in sorted(self.state.tracks))
         ]
 
     def occupancy(self) -> dict[str, Any]:
@@ -263,6 +285,22 @@ class ServiceMemory:
         nodes = self._call("GET", "/graph")["nodes"]
         return [
             Node(n["id"], n["label"], n["kind"], tuple(n["center"]), n["parent"]) for n in nodes
+        ]
+
+    def tracks(self) -> list[TrackSummary]:
+        response = self.client.get(self.scene + "/tracks")
+        response.raise_for_status()
+        return [
+            TrackSummary(
+                t["track_id"],
+                t["label"],
+                t["kind"],
+                t["state"],
+                (t["center"][0], t["center"][1], t["center"][2]),
+                t["parent"],
+                t["visible_misses"],
+            )
+            for t in response.json()
         ]
 
     def occupancy(self) -> dict[str, Any]:
@@ -374,6 +412,7 @@ class RolloutResult:
     stop_reason: str = ""
     stuck_goals: list[tuple[float, float]] = field(default_factory=list)
     final_graph: list[Node] = field(default_factory=list)
+    final_tracks: list[TrackSummary] = field(default_factory=list)
     final_queue: list[str] = field(default_factory=list)
     occupancy: dict[str, Any] = field(default_factory=dict)
     truth_fixtures: tuple[TruthFixture, ...] = ()
@@ -571,6 +610,7 @@ def rollout(
         facing = math.atan2(centroid[1] - robot.y, centroid[0] - robot.x)
         robot.look_around(facing)
     result.final_graph = memory.graph()
+    result.final_tracks = memory.tracks()
     result.final_queue = memory.queue()
     result.occupancy = memory.occupancy()
     result.seconds = time.perf_counter() - started
