@@ -45,7 +45,7 @@ from core.evolve import evolve, fold
 from core.graph import is_published
 from core.inspection import decide_inspection
 from core.params import Params
-from core.planner import Plan, decide_plan
+from core.planner import Plan, decide_plan, unresolved_fixtures
 from core.state import SceneState, ViewPose
 from service.codec import decode_batch, decode_frames
 from service.wire import occupancy_out
@@ -199,8 +199,6 @@ class InProcessMemory:
         return occupancy_out("in-process", self.state).model_dump()
 
     def queue(self) -> list[str]:
-        from core.planner import unresolved_fixtures
-
         return [t.track_id for t in unresolved_fixtures(self.state)]
 
 
