@@ -40,6 +40,7 @@ bench: setup  ## the performance benchmarks (figures printed and written to benc
 	$(BIN)/python -m bench.bench_render
 	$(BIN)/python -m bench.bench_decide
 	$(BIN)/python -m bench.bench_plan
+	$(BIN)/python -m bench.bench_rollout
 	$(BIN)/python -m bench.bench_store append --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_memory
@@ -51,9 +52,10 @@ soak: setup  ## the long fault run: 40 SIGKILLs, a PostgreSQL restart, a poison 
 fuzz: setup  ## schemathesis with 200 examples per operation (make test runs 15)
 	PBDAG_FUZZ_EXAMPLES=200 $(BIN)/pytest tests/service/test_schemathesis.py
 
-eval: setup  ## the paper's protocols on every shipped scenario, seeds 7 17 27 (about 20 minutes)
+eval: setup  ## the paper's protocols on every shipped scenario, seeds 7 17 27 (about 40 minutes on 2 cores)
 	$(BIN)/pbdag eval dynamic --out evaluation/results/dynamic
 	$(BIN)/pbdag eval fixtures --out evaluation/results/fixtures
+	$(BIN)/pbdag eval active --out evaluation/results/active
 
 clean:
 	rm -rf $(VENV) data bench/results evaluation/results .pytest_cache .mypy_cache .ruff_cache

@@ -405,6 +405,11 @@ class PlannerParams:
     uncertainty_weight: Fraction = 0.8
     proximity_weight: Fraction = 0.2
     proximity_range_m: PositiveMetres = 8.0
+    # Ties of equation (5) (ours): by fixture id (None), or, with a seed, by a hash of the seed
+    # and the id: a reproducible random order. The paired acquisition experiment's random
+    # order is weights 0, 0 with a seed; its FIFO order weights 0, 0 without one (track ids
+    # are given in the order fixtures were first hypothesised).
+    tie_break_seed: Annotated[int, Field(ge=0, le=2**31)] | None = None
     # Equation (6): J = |d_foot - d_pref| + 0.08 D_t + (-0.20) min(Clr, 1 m) + 4 (1 - Cov)
     #                   + P_margin.
     preferred_standoff_m: PositiveMetres = 0.90  # d_pref

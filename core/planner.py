@@ -18,6 +18,7 @@ from the log with `as_of`.
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -129,7 +130,15 @@ def candidate(state: SceneState, fixture: Track, robot: ViewPose) -> Candidate:
 def ranked(state: SceneState, fixtures: list[Track], robot: ViewPose) -> list[Candidate]:
     """Fixtures by equation (5), best first (ties by id)."""
     scored = [candidate(state, f, robot) for f in fixtures]
-    return sorted(scored, key=lambda c: (-c.score, c.fixture_id))
+    seed = state.params.planner.tie_break_seed
+    if seed is None:
+        return sorted(scored, key=lambda c: (-c.score, c.fixture_id))
+    return sorted(scored, key=lambda c: (-c.score, _hashed(seed, c.fixture_id), c.fixture_id))
+
+
+def _hashed(seed: int, fixture_id: str) -> str:
+    """A reproducible pseudo-random rank of a fixture under a seed (ties of equation (5))."""
+    return hashlib.sha256(f"{seed}:{fixture_id}".encode()).hexdigest()
 
 
 def plan(state: SceneState, robot: ViewPose) -> Plan:

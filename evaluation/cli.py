@@ -1,12 +1,18 @@
-"""`pbdag eval dynamic|fixtures`: the paper's protocols on shipped or custom scenario files."""
+"""`pbdag eval dynamic|fixtures|active`: the paper's protocols on shipped or custom scenario files."""
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from sim import SCENARIOS_DIR
+
+if TYPE_CHECKING:
+    import httpx
 
 SHIPPED = [
     "hotel-suite.yaml",
@@ -16,6 +22,7 @@ SHIPPED = [
     "busy-living-room.yaml",
 ]
 DEFAULT_SCENARIOS = {"dynamic": SHIPPED, "fixtures": SHIPPED}
+ACTIVE_SHIPPED = ["active/flat.yaml", "active/suite.yaml", "active/floor.yaml"]
 
 
 def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -64,6 +71,136 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
         )
         parser.add_argument("--quiet", action="store_true", help="no progress bar")
         parser.set_defaults(handler=run)
+    active = protocols.add_parser(
+        "active",
+        help="autonomous construction from an empty map: coarse and fine P/R/F1 (Table 3), "
+        "and the paired acquisition orders under inspection budgets",
+    )
+    active.add_argument(
+        "--scenario", nargs="+", type=Path, help="active world YAML files (default: the shipped)"
+    )
+    active.add_argument("--seeds", nargs="+", type=int, default=[7, 17, 27])
+    active.add_argument("--out", type=Path, default=Path("evaluation/results") / "active")
+    active.add_argument(
+        "--orders",
+        nargs="+",
+        default=["pbdag", "nearest", "fifo", "random"],
+        help="acquisition orders (pbdag, nearest, fifo, random; default: all)",
+    )
+    active.add_argument(
+        "--budgets",
+        nargs="+",
+        type=int,
+        default=[2, 4, 6, 8],
+        help="inspection budgets of the paired comparison",
+    )
+    active.add_argument("--keyframes", type=int, default=600, help="coarse-discovery budget")
+    active.add_argument("--via-service", metavar="URL", help="run through this service's API")
+    active.add_argument("--token", help="bearer token for --via-service (default: $PBDAG_TOKEN)")
+    active.add_argument("--params", metavar="JSON", help="overrides of core/params.py")
+    active.add_argument("--quiet", action="store_true", help="no progress lines")
+    active.set_defaults(handler=run_active)
+
+
+def parsed_params(text: str | None) -> dict[str, Any]:
+    """`--params`: a JSON object of overrides of core/params.py, validated (ValueError naming
+    the field otherwise); none given: {}."""
+    from core.errors import InvalidParams
+    from core.params import Params
+
+    if not text:
+        return {}
+    overrides = json.loads(text)  # JSONDecodeError is a ValueError
+    if not isinstance(overrides, dict):
+        raise ValueError("expected a JSON object")
+    try:
+        Params.from_dict(overrides)
+    except InvalidParams as error:
+        raise ValueError(str(error)) from error
+    return overrides
+
+
+def service_client(url: str | None, token: str | None) -> httpx.Client | None:
+    """An HTTP client of the service for `--via-service` (token: the flag, else $PBDAG_TOKEN)."""
+    import httpx
+
+    if not url:
+        return None
+    token = token or os.environ.get("PBDAG_TOKEN")
+    return httpx.Client(
+        base_url=url.rstrip("/"),
+        timeout=60.0,
+        headers={"Authorization": f"Bearer {token}"} if token else {},
+    )
+
+
+def run_active(args: argparse.Namespace) -> int:
+    """Run the active protocol and write its report."""
+
+    import httpx
+
+    from evaluation.active import ORDERS, run_row, write
+    from evaluation.report import code_version
+    from sim.rollout import RolloutResult, RolloutSettings
+    from sim.scenario import ScenarioError
+
+    def fail(message: str) -> int:
+        print(f"pbdag eval active: {message}", file=sys.stderr)
+        return 2
+
+    unknown = [o for o in args.orders if o not in ORDERS]
+    if unknown:
+        return fail(f"--orders: unknown {', '.join(unknown)} (known: {', '.join(ORDERS)})")
+    if any(b < 1 for b in args.budgets):
+        return fail("--budgets: every budget must be at least 1 inspection")
+    if args.keyframes < 1:
+        return fail("--keyframes: must be at least 1")
+    scenarios = args.scenario or [SCENARIOS_DIR / name for name in ACTIVE_SHIPPED]
+    for path in scenarios:
+        if not Path(path).is_file():
+            return fail(f"--scenario: {path} is not a file")
+    try:
+        overrides = parsed_params(args.params)
+    except ValueError as error:
+        return fail(f"--params: {error}")
+    client = service_client(args.via_service, args.token)
+    settings = RolloutSettings(keyframe_budget=args.keyframes)
+    rows: list[dict[str, object]] = []
+    results: list[RolloutResult] = []
+    try:
+        for path in scenarios:
+            for seed in args.seeds:
+                for order in args.orders:
+                    try:
+                        row, result = run_row(
+                            Path(path),
+                            seed,
+                            order,
+                            params=overrides,
+                            client=client,
+                            settings=settings,
+                        )
+                    except ScenarioError as error:
+                        return fail(f"--scenario: {path}: {error}")
+                    except httpx.HTTPError as error:
+                        return fail(f"--via-service: {error}")
+                    rows.append(row)
+                    results.append(result)
+                    if not args.quiet:
+                        print(
+                            f"{row['scenario']} s{seed} {order}: coarse F1 "
+                            f"{row['coarse']['f1']:.3f}, fine F1 {row['fine']['f1']:.3f}, "
+                            f"{row['keyframes']} keyframes, {len(row['inspections'])} "
+                            f"inspections, {row['seconds']:.0f} s",
+                            flush=True,
+                        )
+    finally:
+        if client is not None:
+            client.close()
+    written = write(rows, results, args.out, args.seeds, args.budgets, overrides, code_version())
+    for written_path in written:
+        print(f"wrote {written_path}")
+    return 0
 
 
 def loadable(given: list[Path] | None, defaults: list[str]) -> list[Path] | None:
@@ -90,13 +227,7 @@ def loadable(given: list[Path] | None, defaults: list[str]) -> list[Path] | None
 def run(args: argparse.Namespace) -> int:
     """Run a protocol and write its report."""
     # Imported here so that `pbdag serve` never loads the simulator (open3d) just to build its CLI.
-    import json
-    import os
 
-    import httpx
-
-    from core.errors import InvalidParams
-    from core.params import Params
     from evaluation.methods import DYNAMIC_METHODS, FIXTURE_METHODS, method_named, with_params
     from evaluation.protocols import run_protocol
     from evaluation.report import write_report
@@ -112,27 +243,14 @@ def run(args: argparse.Namespace) -> int:
         if args.methods
         else list(catalogue)
     )
-    overrides: dict[str, object] = {}
-    if args.params:
-        try:
-            overrides = json.loads(args.params)
-            if not isinstance(overrides, dict):
-                raise ValueError("expected a JSON object")
-            Params.from_dict(overrides)
-        except (ValueError, InvalidParams) as error:
-            print(f"pbdag eval: --params: {error}", file=sys.stderr)
-            return 2
+    try:
+        overrides = parsed_params(args.params)
+    except ValueError as error:
+        print(f"pbdag eval: --params: {error}", file=sys.stderr)
+        return 2
+    if overrides:
         methods = with_params(methods, overrides)
-    token = args.token or os.environ.get("PBDAG_TOKEN")
-    client = (
-        httpx.Client(
-            base_url=args.via_service.rstrip("/"),
-            timeout=60.0,
-            headers={"Authorization": f"Bearer {token}"} if token else {},
-        )
-        if args.via_service
-        else None
-    )
+    client = service_client(args.via_service, args.token)
     try:
         rows = run_protocol(
             protocol,

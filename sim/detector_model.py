@@ -72,11 +72,21 @@ class RealisticDetector:
         )
 
     def detect(
-        self, render: Render, world: World, frame_index: int, rng: np.random.Generator
+        self,
+        render: Render,
+        world: World,
+        frame_index: int,
+        rng: np.random.Generator,
+        input_scale: float = 1.0,
     ) -> list[SimDetection]:
-        """Everything the detector reports in one frame."""
+        """Everything the detector reports in one frame.
+
+        `input_scale` < 1 is the far-range detector of a moving robot's keyframes
+        (`far_range_input_scale`): it sees the frame downsampled, so an object's pixel area
+        counts `input_scale^2` of its pixels (small, far objects go unreported).
+        """
         self.luck.step(rng)
-        detections = self._objects(render, world, rng)
+        detections = self._objects(render, world, rng, input_scale**2)
         detections += self._people(render, world, rng)
         detections += self._phantoms(render, rng)
         if self.segmenter is not None:
@@ -97,16 +107,18 @@ class RealisticDetector:
     # -- objects ------------------------------------------------------------------------------
 
     def _objects(
-        self, render: Render, world: World, rng: np.random.Generator
+        self, render: Render, world: World, rng: np.random.Generator, area_scale: float = 1.0
     ) -> list[SimDetection]:
         visible = np.bincount(render.instance.ravel() + 1, minlength=len(world.objects) + 1)[1:]
         surfaces = render.fixture_instance >= 0
         eye = render.pose[:3, 3]
         detections: list[SimDetection] = []
         for index, box in enumerate(world.objects):
-            if visible[index] < self.spec.min_visible_pixels:
+            pixels = int(visible[index] * area_scale)  # what the detector's input holds
+            if pixels < self.spec.min_visible_pixels:
                 continue
             factors = box_view_factors(box, int(visible[index]), render.camera, render.pose)
+            factors = dataclasses.replace(factors, pixels=pixels)
             if not self._reported(f"object/{box.id}", factors):
                 continue
             masks, cropped = self._object_masks(render.instance == index, surfaces, rng)

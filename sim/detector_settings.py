@@ -120,6 +120,10 @@ class DetectorSpec:
     """The simulated detector's error modes and the depth noise model."""
 
     min_visible_pixels: int = 150  # the smallest mask reported (at 640 x 480)
+    # Rollouts only: the detector run on the keyframes the robot posts while it moves sees the
+    # frame downsampled by this factor per axis (an object's pixel area counts scale^2 against
+    # `min_visible_pixels` and the area recall); inspection captures run at full resolution.
+    far_range_input_scale: float = 0.5
     recall: RecallSpec = field(default_factory=RecallSpec)
     masks: MaskSpec = field(default_factory=MaskSpec)
     labels: LabelSpec = field(default_factory=LabelSpec)
@@ -304,6 +308,11 @@ def parse_detector(value: Any, where: str) -> DetectorSpec:
     phantoms = tuple(section.get("phantoms", lambda item, at: sequence(item, at, _phantom), []))
     spec = DetectorSpec(
         min_visible_pixels=section.get("min_visible_pixels", count, default.min_visible_pixels),
+        far_range_input_scale=section.get(
+            "far_range_input_scale",
+            lambda item, at: number(item, at, 0.05, 1.0),
+            default.far_range_input_scale,
+        ),
         recall=section.get("recall", _recall, RecallSpec()),
         masks=section.get("masks", _masks, MaskSpec()),
         labels=section.get("labels", _labels, LabelSpec()),

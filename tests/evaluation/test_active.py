@@ -1,0 +1,224 @@
+"""The autonomous protocol: a closed-loop rollout from an empty map, its metrics and its CLI."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from core.navigation import Navigation
+from core.occupancy import MapGeometry
+from core.planner import nearest_frontier, unresolved_fixtures
+from core.state import ViewPose
+from evaluation.active import (
+    TruthObject,
+    at_budget,
+    fine_scores,
+    score_graph,
+)
+from evaluation.predictions import PredictedNode
+from service.app import create_app
+from service.bootstrap import Container
+from service.cli import main
+from sim.rollout import InProcessMemory, Node, ServiceMemory, rollout
+from sim.scenario import scenario_from_dict
+from tests.clients import local_client
+
+# A 5 m x 4 m room: two fixtures to inspect (a table, a counter), one that is not inspected
+# (a sofa), four fine objects. The robot starts in the middle, facing the table.
+SMALL: dict[str, Any] = {
+    "name": "active-small",
+    "seed": 3,
+    "frames": 4,
+    "frame_period": 0.5,
+    "camera": {"eye_height": 1.3},
+    "room": {"size": [5.0, 4.0, 2.6]},
+    "fixtures": [
+        {"id": "table_1", "label": "table", "center": [1.5, 3.2], "size": [1.2, 0.8, 0.75]},
+        {"id": "counter_1", "label": "counter", "center": [4.7, 1.6], "size": [0.6, 1.6, 0.9]},
+        {"id": "sofa_1", "label": "sofa", "center": [1.6, 0.45], "size": [1.8, 0.8, 0.45]},
+    ],
+    "objects": [
+        {"id": "mug_1", "label": "mug", "size": [0.08, 0.08, 0.1], "on": "table_1", "at": [-0.3, 0.1]},
+        {"id": "book_1", "label": "book", "size": [0.22, 0.16, 0.04], "on": "table_1", "at": [0.3, -0.1]},
+        {"id": "bowl_1", "label": "bowl", "size": [0.16, 0.16, 0.07], "on": "counter_1", "at": [0.0, 0.4]},
+        {"id": "bottle_1", "label": "bottle", "size": [0.07, 0.07, 0.25], "on": "counter_1", "at": [0.0, -0.4]},
+    ],
+    "trajectory": {
+        "type": "waypoints",
+        "points": [
+            {"at": [2.6, 2.0], "look_at": [1.5, 3.2, 0.75]},
+            {"at": [3.4, 2.0], "look_at": [4.7, 1.6, 0.9]},
+        ],
+    },
+}  # fmt: skip
+
+
+def test_a_rollout_from_an_empty_map_finds_inspects_and_exhausts_the_frontiers() -> None:
+    scenario = scenario_from_dict(copy.deepcopy(SMALL))
+    memory = InProcessMemory("small")
+    assert memory.state.occupancy.known_cells() == 0 and not memory.state.tracks
+    result = rollout(scenario, 7, memory)
+    state = memory.state
+    assert result.stop_reason.startswith("plan done"), result.stop_reason
+    assert 0 < len(result.keyframes) <= 600
+    # Every fixture of the world is in the graph, each once, where it is.
+    scores = score_graph(result, result.final_graph)
+    assert scores["coarse"]["recall"] == 1.0 and scores["coarse"]["precision"] == 1.0
+    # Every fixture of the inspection taxonomy was inspected, or the plan says why not.
+    final = result.decisions[-1]
+    for track in state.tracks.values():
+        if track.kind == "fixture" and track.label in ("table", "counter"):
+            assert track.inspection_status == "completed" or track.track_id in final["deferred"], (
+                track.track_id,
+                track.inspection_status,
+                final,
+            )
+    assert not unresolved_fixtures(state) or set(final["deferred"]) >= {
+        t.track_id for t in unresolved_fixtures(state)
+    }
+    inspected = {c.fixture_id for c in result.captures if c.outcome == "completed"}
+    assert len(inspected) == 2  # the table and the counter, not the sofa
+    # No reachable frontier is left on the map the robot built.
+    robot = ViewPose(x=result.path[-1][0], y=result.path[-1][1], yaw=0.0)
+    geometry = MapGeometry.of(state.params.occupancy)
+    navigation = Navigation(state.occupancy, geometry, robot, state.params.planner)
+    assert nearest_frontier(navigation, state.params) is None
+    # Inspection found fine objects on their fixtures.
+    assert scores["fine"]["matched"] >= 2, scores["fine"]
+    # The capture graphs grow the fine F1 curve; budgets past the last capture keep its value.
+    row, _ = run_row_like(result)
+    assert at_budget(row, 99) == row["fine_f1_after_inspections"][-1]
+
+
+def run_row_like(result: Any) -> tuple[dict[str, Any], Any]:
+    curve = [score_graph(result, c.graph_after)["fine"]["f1"] for c in result.captures]
+    return {"fine_f1_after_inspections": curve}, result
+
+
+def test_the_rollout_through_the_http_api_decides_as_in_process(container: Container) -> None:
+    scenario = scenario_from_dict(copy.deepcopy(SMALL))
+    local = rollout(scenario, 17, InProcessMemory("small"))
+    with local_client(create_app(container, run_worker=True)) as client:
+        remote = rollout(scenario, 17, ServiceMemory(client, "small"), via_service=True)
+    assert [d["decision"] for d in remote.decisions] == [d["decision"] for d in local.decisions]
+    assert [c.fixture_id for c in remote.captures] == [c.fixture_id for c in local.captures]
+    assert [c.outcome for c in remote.captures] == [c.outcome for c in local.captures]
+    assert len(remote.keyframes) == len(local.keyframes)
+
+    def graph(nodes: list[Node]) -> list[tuple[str, str, str | None]]:
+        return sorted((n.track_id, n.label, n.parent) for n in nodes)
+
+    assert graph(remote.final_graph) == graph(local.final_graph)
+    for a, b in zip(
+        sorted(remote.final_graph, key=lambda n: n.track_id),
+        sorted(local.final_graph, key=lambda n: n.track_id),
+        strict=True,
+    ):
+        assert math.dist(a.center, b.center) < 1e-6
+
+
+def node(track_id: str, label: str, center: tuple[float, float, float], parent: str | None) -> Any:
+    return PredictedNode(track_id, label, center, parent, "object")
+
+
+def test_fine_scores_need_class_parent_and_distance() -> None:
+    truth = [
+        TruthObject("mug", "mug", (0.0, 0.0, 0.0), "T1"),
+        TruthObject("book", "book", (1.0, 0.0, 0.0), "T1"),
+        TruthObject("cup", "cup", (5.0, 0.0, 0.0), "T2"),
+    ]
+    predicted = [
+        node("a", "mug", (0.1, 0.0, 0.0), "trkA"),  # matches the mug (0.1 m)
+        node("b", "mug", (0.3, 0.0, 0.0), "trkA"),  # a duplicate: a false positive
+        node("c", "book", (1.0, 0.0, 0.0), "trkB"),  # on the wrong fixture
+        node("d", "cup", (5.6, 0.0, 0.0), "trkB"),  # 0.6 m away
+        PredictedNode("trkA", "table", (0.0, 0.0, 0.0), None, "fixture"),  # not an object
+    ]
+    scores = fine_scores(truth, predicted, {"T1": "trkA", "T2": "trkB"})
+    assert (scores.matched, scores.predicted, scores.truth) == (1, 4, 3)
+    assert scores.precision == 0.25 and scores.recall == pytest.approx(1 / 3)
+    assert scores.f1 == pytest.approx(2 * 0.25 * (1 / 3) / (0.25 + 1 / 3))
+    assert scores.center_error == pytest.approx(0.1)
+    # Greedy by distance: the nearer duplicate wins; a missing fixture match matches nothing.
+    assert fine_scores(truth, predicted, {"T2": "trkB"}).matched == 0
+    moved = fine_scores(
+        truth,
+        [*predicted, node("e", "cup", (5.2, 0.0, 0.0), "trkB")],
+        {
+            "T1": "trkA",
+            "T2": "trkB",
+        },
+    )
+    assert moved.matched == 2 and moved.center_error == pytest.approx(0.15)
+    empty = fine_scores(truth, [], {})
+    assert (empty.precision, empty.recall, empty.f1, empty.center_error) == (0.0, 0.0, 0.0, None)
+
+
+def test_fine_f1_at_a_budget_is_the_curve_at_that_many_inspections() -> None:
+    row = {"fine_f1_after_inspections": [0.2, 0.5, 0.7]}
+    assert [at_budget(row, b) for b in (1, 2, 3, 4, 10)] == [0.2, 0.5, 0.7, 0.7, 0.7]
+    assert at_budget({"fine_f1_after_inspections": []}, 3) == 0.0
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        (["--orders", "pbdag", "alphabetical"], "--orders: unknown alphabetical"),
+        (["--budgets", "0"], "--budgets: every budget must be at least 1"),
+        (["--scenario", "no/such/world.yaml"], "--scenario: no/such/world.yaml is not a file"),
+        (
+            ["--params", '{"planner": {"uncertainty_weight": 2}}'],
+            "params.planner.uncertainty_weight",
+        ),
+        (["--params", "[1]"], "--params: expected a JSON object"),
+        (["--keyframes", "0"], "--keyframes: must be at least 1"),
+    ],
+)
+def test_the_cli_refuses_bad_arguments_clearly(
+    arguments: list[str], message: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["eval", "active", "--out", str(tmp_path), *arguments]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "results.json").exists()
+
+
+def test_the_cli_refuses_a_world_that_is_not_a_scenario(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    broken = tmp_path / "broken.yaml"
+    broken.write_text(json.dumps({**SMALL, "room": {"size": [5.0]}}))
+    out = tmp_path / "out"
+    assert (
+        main(["eval", "active", "--scenario", str(broken), "--seeds", "7", "--out", str(out)]) == 2
+    )
+    err = capsys.readouterr().err
+    assert f"--scenario: {broken}: room.size" in err, err
+
+
+def test_the_cli_writes_table3_and_the_paired_comparison(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    world = tmp_path / "small.yaml"
+    world.write_text(json.dumps(SMALL))
+    out = tmp_path / "out"
+    code = main(
+        ["eval", "active", "--scenario", str(world), "--seeds", "7", "--orders", "pbdag", "fifo",
+         "--budgets", "1", "2", "--out", str(out), "--quiet"]
+    )  # fmt: skip
+    assert code == 0
+    document = json.loads((out / "results.json").read_text())
+    assert [r["order"] for r in document["runs"]] == ["pbdag", "fifo"]
+    assert document["paper_table3"]["All rollouts"]["fine"][2] == 0.713
+    table = (out / "table.md").read_text()
+    assert "| active-small (3/4) |" in table and "fine F1 @ 2" in table
+    assert "pbdag vs fifo, paired" in table
+    assert (out / "fine_f1_vs_inspections.png").stat().st_size > 0
+    assert (out / "map_active-small_s7_pbdag.png").stat().st_size > 0
+    run = document["runs"][0]
+    assert run["coarse"]["recall"] == 1.0 and run["stop_reason"].startswith("plan done")
+    assert "wrote" in capsys.readouterr().out
