@@ -74,10 +74,13 @@ def fixture_batch(state: SceneState, batch: Batch, params: Params) -> FixtureBat
     proposals = fixture_proposals(
         keys, counts, sums, kept, scores, margins, evidence, fixture_params
     )
+    # A hypothesis retired unseen has left the memory in play, as retired objects do: seen
+    # again, its place makes a new hypothesis. One retired by a rejection still explains its
+    # cluster, so that what a verifier rejected is not proposed anew.
     tracks = [
         FixtureTrackView(t.track_id, t.label, t.center, t.extent)
         for t in (state.tracks[i] for i in sorted(state.tracks))
-        if t.kind == "fixture"
+        if t.kind == "fixture" and (t.lifecycle != "retired" or t.verification == "rejected")
     ]
     matches, absorbed = associate_fixtures(proposals, tracks, fixture_params)
     for j, proposal in enumerate(proposals):

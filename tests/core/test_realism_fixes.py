@@ -16,7 +16,7 @@ from core.rules import UpdateRules
 from core.state import SceneState
 from core.visibility import observable, samples_passed
 from sim.world import object_on
-from tests.core.rendered import ROOM, TABLE, TABLE_VIEWS, batches, frame
+from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame
 from tests.core.scenes import (
     INTRINSICS,
     detection,
@@ -210,3 +210,23 @@ def test_two_objects_side_by_side_are_not_taken_for_pieces_of_one() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", pair) for i in range(3)])
     assert len(state.tracks) == 2
     assert all(track.lifecycle == "confirmed" for track in state.tracks.values())
+
+
+def at_time(batch: Batch, timestamp: float) -> Batch:
+    return replace(batch, frames=tuple(replace(f, timestamp=timestamp) for f in batch.frames))
+
+
+def test_a_fixture_retired_unseen_does_not_hold_its_place_when_seen_again() -> None:
+    glimpse = batches(ROOM, TABLE_VIEWS[:1], "glimpse")
+    state, _ = run(SceneState(), glimpse)
+    (first,) = [t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table"]
+    assert first.lifecycle == "tentative"
+    # A minute looking at the counter only: the table hypothesis retires, unseen.
+    away = [at_time(b, 61.0) for b in batches(ROOM, COUNTER_VIEWS[:1], "away")]
+    state, _ = run(state, away)
+    assert state.tracks[first.track_id].lifecycle == "retired"
+    # Back at the table, seen from three sides: a table is confirmed, as for a first visit.
+    back = [at_time(b, 62.0 + i) for i, b in enumerate(batches(ROOM, TABLE_VIEWS, "back"))]
+    state, _ = run(state, back)
+    tables = [t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table"]
+    assert [t.lifecycle for t in tables if t.lifecycle != "retired"] == ["confirmed"]
