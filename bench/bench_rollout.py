@@ -14,7 +14,8 @@ from pathlib import Path
 
 from bench.perf_common import write_results
 from sim import SCENARIOS_DIR
-from sim.rollout import InProcessMemory, rollout
+from sim.memories import InProcessMemory
+from sim.rollout import rollout
 from sim.scenario import load_scenario
 
 WORLD = SCENARIOS_DIR / "active" / "floor.yaml"

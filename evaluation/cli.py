@@ -139,7 +139,8 @@ def run_active(args: argparse.Namespace) -> int:
 
     import httpx
 
-    from evaluation.active import ORDERS, run_row, write
+    from evaluation.active import ORDERS, run_row
+    from evaluation.active_report import write
     from evaluation.report import code_version
     from sim.rollout import RolloutResult, RolloutSettings
     from sim.scenario import ScenarioError

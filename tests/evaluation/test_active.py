@@ -14,17 +14,14 @@ from core.navigation import Navigation
 from core.occupancy import MapGeometry
 from core.planner import nearest_frontier, unresolved_fixtures
 from core.state import ViewPose
-from evaluation.active import (
-    TruthObject,
-    at_budget,
-    fine_scores,
-    score_graph,
-)
+from evaluation.active import TruthObject, fine_scores, score_graph
+from evaluation.active_report import at_budget
 from evaluation.predictions import PredictedNode
 from service.app import create_app
 from service.bootstrap import Container
 from service.cli import main
-from sim.rollout import InProcessMemory, Node, ServiceMemory, rollout
+from sim.memories import InProcessMemory, Node, ServiceMemory
+from sim.rollout import rollout
 from sim.scenario import scenario_from_dict
 from tests.clients import local_client
 
