@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -199,20 +200,29 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
         replaces = fixture.track_id
     elif lock is not None:
         replaces = lock.fixture_id  # completed, rejected or removed: the lock is void
-    for entry in order:
-        view = best_view(
-            navigation, by_id[entry.fixture_id], failed.get(entry.fixture_id, ()), params.planner
-        )
-        if view is not None:
-            return make(
-                "inspect",
-                "the best-ranked fixture with a feasible view (equation (5))",
-                target=Target(entry, view),
-                lock="new",
-                replaces=replaces,
-                deferred=tuple(deferred),
+
+    def first_feasible(entries: Iterable[Candidate], reason: str) -> Plan | None:
+        """Lock the first of `entries` with a feasible view; defer the others on the way."""
+        for entry in entries:
+            fixture_id = entry.fixture_id
+            view = best_view(
+                navigation, by_id[fixture_id], failed.get(fixture_id, ()), params.planner
             )
-        deferred.append(Deferral(entry.fixture_id, "no_feasible_view"))
+            if view is not None:
+                return make(
+                    "inspect",
+                    reason,
+                    target=Target(entry, view),
+                    lock="new",
+                    replaces=replaces,
+                    deferred=tuple(deferred),
+                )
+            deferred.append(Deferral(fixture_id, "no_feasible_view"))
+        return None
+
+    inspect = first_feasible(order, "the best-ranked fixture with a feasible view (equation (5))")
+    if inspect is not None:
+        return inspect
     frontier = nearest_frontier(navigation, params)
     if frontier is not None:
         return make(
@@ -222,20 +232,12 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
             deferred=tuple(deferred),
         )
     cooling = [f for f in unresolved if queue_status(state, f.track_id) == "retry_cooldown"]
-    for entry in ranked(state, cooling, robot):
-        view = best_view(
-            navigation, by_id[entry.fixture_id], failed.get(entry.fixture_id, ()), params.planner
-        )
-        if view is not None:
-            return make(
-                "inspect",
-                "nothing else is left: a fixture cooling down after a failed capture",
-                target=Target(entry, view),
-                lock="new",
-                replaces=replaces,
-                deferred=tuple(deferred),
-            )
-        deferred.append(Deferral(entry.fixture_id, "no_feasible_view"))
+    inspect = first_feasible(
+        ranked(state, cooling, robot),
+        "nothing else is left: a fixture cooling down after a failed capture",
+    )
+    if inspect is not None:
+        return inspect
     if not (np.isfinite(navigation.travel) & navigation.known_ok).any():
         return make(
             "explore",
