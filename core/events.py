@@ -16,7 +16,8 @@ from typing import Annotated, Any, ClassVar, Literal
 
 from pydantic import ConfigDict, Field
 
-from core.state import LifecycleState, Track, Vec3, ViewPose
+from core.plan_ledger import ViewPose
+from core.state import LifecycleState, Track, Vec3
 
 __all__ = [
     "BaselineFrozen",

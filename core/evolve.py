@@ -33,10 +33,9 @@ from core.events import (
 )
 from core.occupancy import GridWork
 from core.params import Params
+from core.plan_ledger import InspectionLock, PlanLedger
 from core.state import (
     BaselineRecord,
-    InspectionLock,
-    PlanLedger,
     SceneState,
     Track,
     Vec3,

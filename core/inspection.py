@@ -20,7 +20,8 @@ from core.geometry import Proposal
 from core.masks import Mask, mask_iou
 from core.observation import Frame
 from core.params import Params
-from core.state import InspectionStatus, SceneState, Track, ViewPose
+from core.plan_ledger import ViewPose
+from core.state import InspectionStatus, SceneState, Track
 from core.support import SupportSurface, support_of
 from core.transitions import added_object, confirmed, observed_object, vec3
 from core.visibility import samples_passed

@@ -31,7 +31,8 @@ from core.events import Event, InspectionTargeted
 from core.navigation import Frontier, Navigation
 from core.occupancy import MapGeometry
 from core.params import Params
-from core.state import SceneState, Track, ViewPose
+from core.plan_ledger import ViewPose
+from core.state import SceneState, Track
 from core.uncertainty import Uncertainty, fixture_uncertainty
 from core.views import View, best_view
 

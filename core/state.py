@@ -10,10 +10,11 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 import numpy.typing as npt
-from pydantic import ConfigDict, Field
+from pydantic import Field
 
 from core.occupancy import OccupancyGrid
 from core.params import Params
+from core.plan_ledger import PlanLedger
 from core.voxels import pack
 
 Vec3 = tuple[float, float, float]
@@ -297,87 +298,6 @@ def _row(t: Track) -> tuple[str, str, tuple[float, ...]]:
             *box_extent,
         ),
     )
-
-
-@dataclass(frozen=True, kw_only=True)
-class ViewPose:
-    """A planar robot pose in the world frame: metres and radians (yaw about z, from +x)."""
-
-    __pydantic_config__ = ConfigDict(allow_inf_nan=False)
-    x: float
-    y: float
-    yaw: float
-
-    def to_dict(self) -> dict[str, float]:
-        """JSON-able form."""
-        return {"x": self.x, "y": self.y, "yaw": self.yaw}
-
-    @classmethod
-    def from_dict(cls, record: Mapping[str, Any]) -> ViewPose:
-        """Inverse of `to_dict`."""
-        return cls(x=float(record["x"]), y=float(record["y"]), yaw=float(record["yaw"]))
-
-
-@dataclass(frozen=True)
-class InspectionLock:
-    """The locked inspection target (section 3.4): the fixture, its view, the event's seq."""
-
-    fixture_id: str
-    view: ViewPose
-    pitch: float
-    seq: int
-
-
-@dataclass(frozen=True)
-class PlanLedger:
-    """What the log says of inspection planning: the lock, and each fixture's failures."""
-
-    lock: InspectionLock | None = None
-    locks: int = 0  # inspection_targeted events so far
-    failed_views: Mapping[str, tuple[ViewPose, ...]] = field(default_factory=dict)
-    # The value of `locks` when the fixture's last capture failed (the retry cooldown).
-    failed_at_lock: Mapping[str, int] = field(default_factory=dict)
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-able form (snapshots)."""
-        lock = self.lock
-        return {
-            "lock": None
-            if lock is None
-            else {
-                "fixture_id": lock.fixture_id,
-                "view": lock.view.to_dict(),
-                "pitch": lock.pitch,
-                "seq": lock.seq,
-            },
-            "locks": self.locks,
-            "failed_views": {
-                key: [v.to_dict() for v in views]
-                for key, views in sorted(self.failed_views.items())
-            },
-            "failed_at_lock": dict(sorted(self.failed_at_lock.items())),
-        }
-
-    @classmethod
-    def from_dict(cls, record: Mapping[str, Any]) -> PlanLedger:
-        """Inverse of `to_dict`."""
-        lock = record["lock"]
-        return cls(
-            lock=None
-            if lock is None
-            else InspectionLock(
-                lock["fixture_id"],
-                ViewPose.from_dict(lock["view"]),
-                float(lock["pitch"]),
-                int(lock["seq"]),
-            ),
-            locks=int(record["locks"]),
-            failed_views={
-                key: tuple(ViewPose.from_dict(v) for v in views)
-                for key, views in record["failed_views"].items()
-            },
-            failed_at_lock={key: int(v) for key, v in record["failed_at_lock"].items()},
-        )
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,8 @@ import numpy.typing as npt
 
 from core.navigation import Navigation
 from core.params import PlannerParams
-from core.state import Track, ViewPose
+from core.plan_ledger import ViewPose
+from core.state import Track
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]

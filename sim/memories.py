@@ -21,8 +21,9 @@ from core.evolve import evolve, fold
 from core.graph import is_published
 from core.inspection import decide_inspection
 from core.params import Params
+from core.plan_ledger import ViewPose
 from core.planner import Plan, decide_plan, unresolved_fixtures
-from core.state import SceneState, ViewPose
+from core.state import SceneState
 from service.codec import decode_batch, decode_frames
 from service.wire import occupancy_out
 

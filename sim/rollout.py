@@ -35,7 +35,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.params import Params
-from core.state import ViewPose
+from core.plan_ledger import ViewPose
 from sim.camera import look_at
 from sim.detector_model import RealisticDetector
 from sim.free_space import FreeSpace

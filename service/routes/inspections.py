@@ -15,8 +15,8 @@ from api_schema import (
 )
 from core.events import InspectionRecorded
 from core.inspection import decide_inspection
+from core.plan_ledger import ViewPose
 from core.planner import queue_status, unresolved_fixtures
-from core.state import ViewPose
 from core.uncertainty import fixture_uncertainty
 from service.codec import decode_frames
 from service.commands import run_command

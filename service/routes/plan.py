@@ -9,8 +9,9 @@ from starlette.responses import Response
 
 from api_schema import Occupancy, PlanIn, PlanOut
 from core.events import Event
+from core.plan_ledger import ViewPose
 from core.planner import Plan, decide_plan, plan
-from core.state import SceneState, ViewPose
+from core.state import SceneState
 from service.commands import run_command
 from service.deps import AsOf, ContainerDep, SceneDep, StatesDep
 from service.wire import occupancy_out, occupancy_png, plan_out

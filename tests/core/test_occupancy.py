@@ -25,7 +25,8 @@ from core.occupancy import (
 )
 from core.occupancy_evidence import frame_cells, occupancy_evidence
 from core.params import Params
-from core.state import SceneState, ViewPose
+from core.plan_ledger import ViewPose
+from core.state import SceneState
 from tests.core.maps import grid_of
 
 PARAMS = Params()

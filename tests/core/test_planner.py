@@ -16,8 +16,9 @@ from core.inspection import decide_inspection
 from core.navigation import Navigation
 from core.occupancy import OccupancyGrid
 from core.params import Params
+from core.plan_ledger import ViewPose
 from core.planner import decide_plan, inspection_queue, plan, proximity, queue_status
-from core.state import SceneState, Track, ViewPose
+from core.state import SceneState, Track
 from core.uncertainty import TERMS, fixture_uncertainty
 from core.views import best_view, feasible_views, view_cost
 from tests.core.maps import GEOMETRY, grid_of, paint, room
