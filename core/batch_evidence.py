@@ -58,7 +58,9 @@ class BatchEvidence:
         self._row = {track_id: row for row, track_id in enumerate(self._ids)}
         self._embeddings: dict[int, FloatArray | None] = {}
         self._beliefs: dict[int, Mapping[str, float]] = {}
-        self._live_rows = ~arrays.gone  # removed and rejected tracks get no negative evidence
+        # Removed and rejected tracks get no negative evidence, and neither do fine nodes held
+        # by the capture ledger: only a capture of their fixture speaks of them (section 3.3).
+        self._live_rows = ~arrays.gone & ~arrays.captured
         self._surfaces: list[SupportSurface] | None = None
         self._eligible: npt.NDArray[np.bool_] | None = None
 
@@ -89,6 +91,13 @@ class BatchEvidence:
             eligible,
             recoverable,
         )
+
+    def held_by_capture(self, track_id: str) -> bool:
+        """A fine node attached through the capture ledger: a frame's proposal it explains is
+        set aside, neither an update of it nor a new hypothesis (section 3.3)."""
+        row = self._row[track_id]
+        arrays = self.state.arrays
+        return row < len(arrays.track_ids) and bool(arrays.captured[row])
 
     def forget_beyond(self, timestamp: float) -> None:
         """Without persistent identity: removed and long-unseen tracks cannot be matched."""

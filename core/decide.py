@@ -41,8 +41,11 @@ def decide(
         #    A leftover piece of an object another proposal shows (an over-segmented mask) is
         #    set aside, not taken for a new object.
         pieces = fragments(proposals, matches, evidence.extent_of, params.association)
+        #    A fine node attached by an inspection capture does not re-enter this front end: a
+        #    proposal it explains is set aside too (section 3.3).
+        held = {j for j, track_id in matches.items() if evidence.held_by_capture(track_id)}
         for j, proposal in enumerate(proposals):
-            if j not in pieces:
+            if j not in pieces and j not in held:
                 evidence.observe(matches.get(j) or evidence.new_track(proposal), proposal)
     # 5. One existence update per track per batch (equation (3)), support parents from
     #    geometry, then lifecycle events.

@@ -117,7 +117,11 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 )
             case TrackReparented():
                 tracks[event.track_id] = tracks[event.track_id].evolved(parent=event.new_parent)
-            case TrackDemoted() | TrackRemoved() | TrackRetired():
+            case TrackRemoved():
+                tracks[event.track_id] = tracks[event.track_id].evolved(
+                    lifecycle=event.state, capture_id=None
+                )
+            case TrackDemoted() | TrackRetired():
                 tracks[event.track_id] = tracks[event.track_id].evolved(lifecycle=event.state)
             case VerificationRequested():
                 tracks[event.track_id] = tracks[event.track_id].evolved(verification="pending")
@@ -127,6 +131,9 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 tracks[event.track_id] = tracks[event.track_id].evolved(
                     inspection_status=event.status, inspection_attempts=event.attempts
                 )
+                for child in event.children:  # now held by the capture ledger (section 3.3)
+                    tracks[child] = tracks[child].evolved(capture_id=event.capture_id)
+                touched.update(event.children)
                 plan = _after_capture(plan, event)
             case _:
                 raise ValueError(f"no evolve rule for event {type(event).__name__}")

@@ -23,8 +23,8 @@ from core.params import Params
 from core.plan_ledger import ViewPose
 from core.state import InspectionStatus, SceneState, Track
 from core.support import SupportSurface, support_of
-from core.transitions import added_object, confirmed, observed_object, vec3
-from core.visibility import samples_passed
+from core.transitions import added_object, confirmed, observed_object, vec3, visible_miss
+from core.visibility import observable, samples_passed
 
 SUPPORT_SLAB_M = 0.02  # thickness of the sampled support region (the fixture's top surface)
 
@@ -191,4 +191,41 @@ def _attach_children(
                 )
                 events += [first, confirm, *added[1:]]
         children.append(track_id)
-    return events, children
+    return [*events, *_unseen_children(state, fixture, frame, set(children), params)], children
+
+
+def _unseen_children(
+    state: SceneState, fixture: Track, frame: Frame, found: set[str], params: Params
+) -> list[Event]:
+    """Visible misses of the fixture's fine nodes this capture shows and did not find: only a
+    capture speaks of what the capture ledger holds (section 3.3)."""
+    held = [
+        t
+        for t in state.tracks.values()
+        if t.capture_id is not None
+        and t.lifecycle in ("confirmed", "demoted")
+        and t.parent == fixture.track_id
+        and t.track_id not in found
+    ]
+    if not held:
+        return []
+    boxes = [_box_of(t) for t in held]
+    sightings = samples_passed(
+        np.array([c for c, _ in boxes]), np.array([e for _, e in boxes]), frame, params.visibility
+    )
+    events: list[Event] = []
+    for track, sighting in zip(held, sightings, strict=True):
+        if observable(sighting, params.visibility):
+            events += visible_miss(track, sighting.passed, frame.frame_id, params)
+    return events
+
+
+def _box_of(track: Track) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """The box the visibility gate samples: the union of its views, else center and extent."""
+    if track.box is None:
+        return track.center, track.extent
+    low, high = track.box[:3], track.box[3:]
+    return (
+        tuple((a + b) / 2 for a, b in zip(low, high, strict=True)),
+        tuple(b - a for a, b in zip(low, high, strict=True)),
+    )

@@ -24,7 +24,8 @@ LifecycleState = Literal["tentative", "confirmed", "demoted", "removed", "retire
 TrackKind = Literal["object", "fixture"]
 VerificationStatus = Literal["pending", "confirmed", "rejected"]
 InspectionStatus = Literal["completed", "abandoned"]
-SNAPSHOT_FORMAT_VERSION = 4  # 4: the occupancy map, the scene clock and the inspection plan
+# 4: the occupancy map, the scene clock and the inspection plan; 5: fine nodes of captures
+SNAPSHOT_FORMAT_VERSION = 5
 VoxelKey = tuple[int, int, int]
 
 
@@ -70,6 +71,11 @@ class Track:
     # the boxes observed since the object last moved. One observation's box is too small when
     # its mask was cut by the image border or by something in front; the union is the object.
     box: Annotated[tuple[float, ...] | None, Field(exclude_if=_none)] = None
+    # Objects: the inspection capture that last attached it to its fixture. Such a fine node is
+    # held by the capture ledger and does not re-enter the frame-level front end (section 3.3):
+    # keyframes neither update it nor count misses against it; a later capture of its fixture
+    # does both. Removal releases it to the front end.
+    capture_id: Annotated[str | None, Field(exclude_if=_none)] = None
 
     def evolved(self, **changes: Any) -> Track:
         """A copy with `changes` (what dataclasses.replace does, without its per-field cost).
@@ -152,6 +158,7 @@ class Track:
             "inspection_status": self.inspection_status,
             "inspection_attempts": self.inspection_attempts,
             "box": None if self.box is None else list(self.box),
+            **({} if self.capture_id is None else {"capture_id": self.capture_id}),
         }
 
     @classmethod
@@ -173,6 +180,7 @@ class Track:
             embedding_sum=None if embedding_sum is None else tuple(embedding_sum),
             published_center=None if published is None else tuple(published),
             box=None if record["box"] is None else tuple(record["box"]),
+            capture_id=record.get("capture_id"),
         )
         if values.keys() != _TRACK_FIELDS:
             raise ValueError(f"track record fields differ: {sorted(values.keys() ^ _TRACK_FIELDS)}")
@@ -211,13 +219,14 @@ class TrackArrays:
     visible_misses: npt.NDArray[np.int64]  # visibility-admissible misses since last seen
     unpublished_tentative: npt.NDArray[np.bool_]  # a hypothesis never published
     last_observed: npt.NDArray[np.float64]  # tau_i (NaN when never)
+    captured: npt.NDArray[np.bool_]  # a fine node the capture ledger holds (until removed)
 
     @classmethod
     def of(cls, tracks: list[Track]) -> TrackArrays:
         """The columns of these tracks (in the order given)."""
         rows = [_row(t) for t in tracks]
         count = len(rows)
-        numbers = np.array([r[2] for r in rows], dtype=np.float64).reshape(count, 18)
+        numbers = np.array([r[2] for r in rows], dtype=np.float64).reshape(count, 19)
         return cls(
             track_ids=tuple(r[0] for r in rows),
             kinds=tuple(r[1] for r in rows),
@@ -231,6 +240,7 @@ class TrackArrays:
             visible_misses=numbers[:, 9].astype(np.int64),
             unpublished_tentative=numbers[:, 10] > 0,
             last_observed=numbers[:, 11].copy(),
+            captured=numbers[:, 18] > 0,
         )
 
     def evolved(self, tracks: Mapping[str, Track], touched: set[str]) -> TrackArrays:
@@ -272,6 +282,7 @@ _NUMERIC_COLUMNS = (
     "visible_misses",
     "unpublished_tentative",
     "last_observed",
+    "captured",
 )
 
 
@@ -296,6 +307,7 @@ def _row(t: Track) -> tuple[str, str, tuple[float, ...]]:
             np.nan if t.last_observed is None else t.last_observed,
             *box_center,
             *box_extent,
+            t.capture_id is not None and t.lifecycle in ("confirmed", "demoted"),
         ),
     )
 

@@ -230,3 +230,47 @@ def test_a_fixture_retired_unseen_does_not_hold_its_place_when_seen_again() -> N
     state, _ = run(state, back)
     tables = [t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table"]
     assert [t.lifecycle for t in tables if t.lifecycle != "retired"] == ["confirmed"]
+
+
+def inspected_book() -> tuple[SceneState, str, str]:
+    """The room after a capture of the table attached a book: (state, book id, table id)."""
+    world = ROOM.with_object(object_on(TABLE, "book", "book", (0.2, 0.15, 0.05), at=(-0.3, 0.1)))
+    state, _ = run(SceneState(), list(batches(ROOM, TABLE_VIEWS * 2, "b")))
+    table = next(t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table")
+    view = frame(world, (2.0, 1.2, 1.5), (2.0, 2.0, 0.75), "insp")
+    state = fold(state, decide_inspection(state, "cap-1", table.track_id, [view], True))
+    book = next(t for t in state.tracks.values() if t.label == "book")
+    assert book.capture_id == "cap-1" and book.lifecycle == "confirmed"
+    return state, book.track_id, table.track_id
+
+
+def test_keyframes_leave_a_fine_node_of_a_capture_alone() -> None:
+    """Section 3.3: fine nodes from inspection do not re-enter the frame-level front end."""
+    state, book_id, _ = inspected_book()
+    # The book gone, its place in plain view of keyframes: no miss, no demotion.
+    state_gone, per_batch = run(state, list(batches(ROOM, TABLE_VIEWS * 6, "k")))
+    assert all(e.track_id != book_id for events in per_batch for e in events)
+    assert state_gone.tracks[book_id].lifecycle == "confirmed"
+    # The book still there: its keyframe sightings are set aside, neither an update nor a new
+    # hypothesis.
+    world = ROOM.with_object(object_on(TABLE, "book", "book", (0.2, 0.15, 0.05), at=(-0.3, 0.1)))
+    state_seen, per_batch = run(state, list(batches(world, TABLE_VIEWS * 3, "s")))
+    assert all(e.track_id != book_id for events in per_batch for e in events)
+    assert [t.track_id for t in state_seen.tracks.values() if t.label == "book"] == [book_id]
+
+
+def test_a_capture_that_shows_the_place_empty_counts_misses_then_releases_the_node() -> None:
+    state, book_id, table_id = inspected_book()
+    misses = []
+    for k in range(12):
+        view = frame(ROOM, (2.0, 1.2, 1.5), (2.0, 2.0, 0.75), f"empty-{k}")
+        events = decide_inspection(state, f"cap-e{k}", table_id, [view], True)
+        misses += [type(e).__name__ for e in events if e.track_id == book_id]
+        state = fold(state, events)
+        if state.tracks[book_id].lifecycle == "removed":
+            break
+    assert misses[0] == "VisibleMiss" and misses[-1] == "TrackRemoved"
+    assert set(misses) <= {"VisibleMiss", "TrackDemoted", "TrackRemoved"}
+    book = state.tracks[book_id]
+    assert book.capture_id is None  # removed: released to the frame-level front end
+    assert not state.arrays.captured[state.arrays.track_ids.index(book_id)]

@@ -164,7 +164,9 @@ def test_baseline_is_reproducible_pins_its_fixtures_and_seeds_a_new_session(api:
     assert fixture_ids(client, later_id) == ids  # re-observed, not duplicated
 
 
-def test_inspection_attaches_three_children_and_later_moves_keep_their_identity(api: Api) -> None:
+def test_inspection_attaches_three_children_held_by_the_capture_ledger(api: Api) -> None:
+    """Section 3.3: fine nodes from inspection do not re-enter the frame-level front end. A
+    keyframe neither moves nor duplicates them; the next capture of their fixture does both."""
     client, worker, _ = api
     scene_id = discovered(client, worker)
     ids = fixture_ids(client, scene_id)
@@ -198,17 +200,32 @@ def test_inspection_attaches_three_children_and_later_moves_keep_their_identity(
         for f in client.get(f"/v1/scenes/{scene_id}/inspection-queue").json()["fixtures"]
     ]
     moved = world.moved("bowl", (TABLE.center[0] + 0.45, TABLE.center[1] - 0.2, TABLE.top_z + 0.04))
+    bowl_id = children["bowl"]["id"]
+
+    def bowl_events(kind: str) -> list[dict[str, object]]:
+        query = {"type": kind, "track_id": bowl_id}
+        page = client.get(f"/v1/scenes/{scene_id}/events", params=query).json()
+        return list(page["events"])
+
+    observed_before = len(bowl_events("update"))
     feed(
         client,
         worker,
         scene_id,
         [{"batch_id": "later", "frames": [wire_frame(moved, CLOSE_VIEW, "later-0")]}],
     )
-    moves = client.get(
-        f"/v1/scenes/{scene_id}/events", params={"type": "move", "track_id": children["bowl"]["id"]}
-    ).json()
-    assert len(moves["events"]) == 1
-    assert [n["id"] for n in nodes(client, scene_id, label="bowl")] == [children["bowl"]["id"]]
+    assert bowl_events("move") == [] and len(bowl_events("update")) == observed_before
+    assert [n["id"] for n in nodes(client, scene_id, label="bowl")] == [bowl_id]
+    again = {
+        "fixture_id": ids["table"],
+        "frames": [wire_frame(moved, CLOSE_VIEW, "insp-1")],
+        "fixture_verified": True,
+    }
+    response = client.post(f"/v1/scenes/{scene_id}/inspections", json=again)
+    assert response.status_code == 201, response.text
+    assert bowl_id in response.json()["children"]
+    assert len(bowl_events("move")) == 1
+    assert [n["id"] for n in nodes(client, scene_id, label="bowl")] == [bowl_id]
 
 
 def test_failed_capture_keeps_the_fixture_queued_for_a_bounded_retry(api: Api) -> None:
