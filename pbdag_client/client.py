@@ -279,7 +279,8 @@ def _answer(call: _Call[T], response: httpx.Response) -> T:
 
 def _poll_wait(error: RateLimited, poll_interval_s: float) -> float:
     """How long to wait after a 429 while polling."""
-    return max(poll_interval_s, error.retry_after or 1.0)
+    retry_after = error.retry_after
+    return max(poll_interval_s, 1.0 if retry_after is None else retry_after)
 
 
 class Client:
@@ -370,6 +371,8 @@ class Client:
             try:
                 status = self.batch(scene_id, batch_id)
             except RateLimited as error:
+                if time.monotonic() >= deadline:
+                    raise
                 time.sleep(_poll_wait(error, poll_interval))
                 continue
             if status.status == "done":
@@ -585,6 +588,8 @@ class AsyncClient:
             try:
                 status = await self.batch(scene_id, batch_id)
             except RateLimited as error:
+                if time.monotonic() >= deadline:
+                    raise
                 await asyncio.sleep(_poll_wait(error, poll_interval))
                 continue
             if status.status == "done":
