@@ -28,6 +28,7 @@ import numpy as np
 from core.params import deep_merge
 from evaluation.metrics import fixture_scores, harmonic_f1, ratio
 from evaluation.predictions import PredictedNode
+from pbdag_client import Client
 from sim.memories import InProcessMemory, Memory, Node, ServiceMemory
 from sim.rollout import RolloutResult, RolloutSettings, rollout
 from sim.scenario import load_scenario
@@ -215,7 +216,7 @@ def run_row(
     order: str,
     *,
     params: Mapping[str, Any] | None = None,
-    client: Any = None,
+    client: Client | None = None,
     settings: RolloutSettings | None = None,
 ) -> tuple[dict[str, Any], RolloutResult]:
     """One rollout of one order on one world and seed, scored."""

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 from sim import SCENARIOS_DIR
 
 if TYPE_CHECKING:
-    import httpx
+    from pbdag_client import Client
 
 SHIPPED = [
     "hotel-suite.yaml",
@@ -120,18 +120,13 @@ def parsed_params(text: str | None) -> dict[str, Any]:
     return overrides
 
 
-def service_client(url: str | None, token: str | None) -> httpx.Client | None:
-    """An HTTP client of the service for `--via-service` (token: the flag, else $PBDAG_TOKEN)."""
-    import httpx
+def service_client(url: str | None, token: str | None) -> Client | None:
+    """The service's client for `--via-service` (token: the flag, else $PBDAG_TOKEN)."""
+    from pbdag_client import Client
 
     if not url:
         return None
-    token = token or os.environ.get("PBDAG_TOKEN")
-    return httpx.Client(
-        base_url=url.rstrip("/"),
-        timeout=60.0,
-        headers={"Authorization": f"Bearer {token}"} if token else {},
-    )
+    return Client(url, token or os.environ.get("PBDAG_TOKEN"), timeout=60.0)
 
 
 def run_active(args: argparse.Namespace) -> int:
@@ -142,6 +137,7 @@ def run_active(args: argparse.Namespace) -> int:
     from evaluation.active import ORDERS, run_row
     from evaluation.active_report import write
     from evaluation.report import code_version
+    from pbdag_client import PbdagError
     from sim.rollout import RolloutResult, RolloutSettings
     from sim.scenario import ScenarioError
 
@@ -183,7 +179,7 @@ def run_active(args: argparse.Namespace) -> int:
                         )
                     except ScenarioError as error:
                         return fail(f"--scenario: {path}: {error}")
-                    except httpx.HTTPError as error:
+                    except (httpx.HTTPError, PbdagError) as error:
                         return fail(f"--via-service: {error}")
                     rows.append(row)
                     results.append(result)

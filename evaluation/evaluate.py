@@ -9,9 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
-
-import httpx
+from typing import Any
 
 from api_schema import BatchIn
 from core.decide import decide
@@ -22,10 +20,8 @@ from core.params import Params
 from core.state import SceneState, Track
 from evaluation.methods import Method
 from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
+from pbdag_client import Client
 from service.codec import decode_batch
-
-if TYPE_CHECKING:  # tests drive the service in process through Starlette's client (on httpx2)
-    from fastapi.testclient import TestClient
 
 WireBatch = tuple[
     int, dict[str, Any]
@@ -159,7 +155,7 @@ def run_in_process(
 def run_via_service(
     method: Method,
     batches: Sequence[WireBatch],
-    client: httpx.Client | TestClient,
+    client: Client,
     on_batch: Callable[[], None] | None = None,
     timeout_s: float = 120.0,
 ) -> MethodRun:
@@ -169,50 +165,26 @@ def run_via_service(
             f"{method.name} changes the update rules; only parameter variants run through the API"
         )
     started = time.perf_counter()
-    response = client.post(
-        "/v1/scenes", json={"name": f"eval {method.name}", "params": method.params}
-    )
-    response.raise_for_status()
-    scene_id = response.json()["id"]
+    scene_id = client.create_scene(f"eval {method.name}", params=method.params).id
     recorder = Recorder()
     for last_frame, body in batches:
-        assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code in (200, 202)
-        status = _wait_done(client, scene_id, body["batch_id"], timeout_s)
+        batch = BatchIn.model_validate(body)
+        client.post_batch(scene_id, batch)
+        status = client.wait_for_batch(
+            scene_id, batch.batch_id, timeout=timeout_s, poll_interval=0.01
+        )
         events: list[MethodEvent] = []
-        if status["first_seq"] is not None:
-            page = client.get(
-                f"/v1/scenes/{scene_id}/events",
-                params={"after": status["first_seq"] - 1, "limit": 1000},
-            ).json()["events"]
+        if status.first_seq is not None:
             events = [
-                MethodEvent(last_frame, e["type"], e["track_id"], e["details"])
-                for e in page
-                if e["seq"] <= status["last_seq"] and e["track_id"] is not None
+                MethodEvent(last_frame, e.type, e.track_id, e.details)
+                for e in client.events(scene_id, after=status.first_seq - 1, up_to=status.last_seq)
+                if e.track_id is not None
             ]
-        graph = client.get(f"/v1/scenes/{scene_id}/graph").json()
         nodes = tuple(
-            PredictedNode(n["id"], n["label"], tuple(n["center"]), n["parent"], n["kind"])
-            for n in graph["nodes"]
+            PredictedNode(n.id, n.label, (n.center[0], n.center[1], n.center[2]), n.parent, n.kind)
+            for n in client.graph(scene_id).nodes
         )
         recorder.batch(last_frame, nodes, events)
         if on_batch is not None:
             on_batch()
     return recorder.result(time.perf_counter() - started)
-
-
-def _wait_done(
-    client: httpx.Client | TestClient, scene_id: str, batch_id: str, timeout_s: float
-) -> dict[str, Any]:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        response = client.get(f"/v1/scenes/{scene_id}/batches/{batch_id}")
-        if response.status_code == 429:  # polling faster than the service's rate limit
-            time.sleep(float(response.headers.get("retry-after", "1")))
-            continue
-        status: dict[str, Any] = response.json()
-        if status["status"] == "done":
-            return status
-        if status["status"] == "dead":
-            raise RuntimeError(f"batch {batch_id} failed in the service: {status['error']}")
-        time.sleep(0.01)
-    raise TimeoutError(f"batch {batch_id} not processed within {timeout_s:.0f} s")

@@ -8,13 +8,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import httpx
 from tqdm import tqdm
 
 from evaluation.change_metrics import class_false_absence, event_recall, false_absence
 from evaluation.evaluate import MethodRun, WireBatch, run_in_process, run_via_service
 from evaluation.methods import Method
 from evaluation.metrics import fixture_scores, global_assignment, identity_metrics, presence_f1
+from pbdag_client import Client
 from sim.scenario import load_scenario
 from sim.stream import SimRun, simulate, wire_batches
 from sim.truth import FrameTruth
@@ -56,9 +56,7 @@ def acquired_truth(run: SimRun) -> list[FrameTruth]:
     return frames
 
 
-def run_method(
-    stream: Stream, method: Method, via_service: httpx.Client | None, bar: tqdm
-) -> MethodRun:
+def run_method(stream: Stream, method: Method, via_service: Client | None, bar: tqdm) -> MethodRun:
     """One method on one stream, advancing the progress bar per batch."""
     if via_service is not None and method.name == "PBD-AG":
         return run_via_service(method, stream.batches, via_service, on_batch=lambda: bar.update(1))
@@ -165,7 +163,7 @@ def run_protocol(
     scenario_paths: Sequence[Path],
     seeds: Sequence[int],
     methods: Sequence[Method],
-    via_service: httpx.Client | None = None,
+    via_service: Client | None = None,
     progress: bool = True,
     frames: int | None = None,
 ) -> list[dict[str, Any]]:

@@ -2,18 +2,18 @@
 
 `InProcessMemory` calls decide/fold for batches, the planner's `decide_plan` and
 `decide_inspection`, exactly the functions the service's worker and routes call;
-`ServiceMemory` POSTs batches, /plan and /inspections instead. Both answer the same `Memory`
+`ServiceMemory` POSTs batches, /plan and /inspections through `pbdag_client` instead. Both answer the same `Memory`
 protocol, so a rollout cannot tell them apart (a test checks they take the same decisions).
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, TypeVar
 
-from api_schema import BatchIn, InspectionIn, Occupancy
+from api_schema import BatchIn, InspectionIn, RobotPose
 from core.decide import decide
 from core.errors import PbdagError
 from core.events import SceneCreated
@@ -24,8 +24,12 @@ from core.params import Params
 from core.plan_ledger import ViewPose
 from core.planner import Plan, decide_plan, unresolved_fixtures
 from core.state import SceneState
+from pbdag_client import Client, RateLimited
+from pbdag_client import PbdagError as ApiError
 from service.codec import decode_batch, decode_frames
 from service.wire import occupancy_out
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -153,106 +157,102 @@ class InProcessMemory:
 
 
 class ServiceMemory:
-    """The service over HTTP: POST batches (waiting for each), POST /plan, POST /inspections."""
+    """The service over HTTP through its client: POST batches (waiting for each), POST /plan,
+    POST /inspections. A 429 is waited out (its Retry-After) for up to `timeout_s`."""
 
     def __init__(
         self,
-        client: Any,  # httpx.Client, or Starlette's TestClient in tests
+        client: Client,
         name: str,
         params: Mapping[str, Any] | None = None,
         timeout_s: float = 120.0,
     ) -> None:
         self.client = client
         self.timeout_s = timeout_s
-        response = client.post("/v1/scenes", json={"name": name, "params": dict(params or {})})
-        response.raise_for_status()
-        self.scene = f"/v1/scenes/{response.json()['id']}"
+        self.scene_id = self._patiently(
+            lambda: client.create_scene(name, params=dict(params or {}))
+        ).id
 
-    def _call(self, method: str, path: str, **kwargs: Any) -> dict[str, Any]:
+    def _patiently(self, call: Callable[[], T]) -> T:
         deadline = time.monotonic() + self.timeout_s
         while True:
-            response = self.client.request(method, self.scene + path, **kwargs)
-            if response.status_code == 429 and time.monotonic() < deadline:
-                time.sleep(float(response.headers.get("retry-after", "1")))
-                continue
-            response.raise_for_status()
-            body: dict[str, Any] = response.json()
-            return body
+            try:
+                return call()
+            except RateLimited as error:
+                if time.monotonic() >= deadline:
+                    raise
+                time.sleep(error.retry_after if error.retry_after is not None else 1.0)
 
     def post_batch(self, body: dict[str, Any]) -> None:
-        self._call("POST", "/batches", json=body)
-        deadline = time.monotonic() + self.timeout_s
-        while time.monotonic() < deadline:
-            status = self._call("GET", f"/batches/{body['batch_id']}")
-            if status["status"] == "done":
-                return
-            if status["status"] == "dead":
-                raise RuntimeError(f"batch {body['batch_id']} dead: {status['error']}")
-            time.sleep(0.01)
-        raise TimeoutError(f"batch {body['batch_id']} not done within {self.timeout_s:.0f} s")
+        batch = BatchIn.model_validate(body)
+        self._patiently(lambda: self.client.post_batch(self.scene_id, batch))
+        self.client.wait_for_batch(
+            self.scene_id, batch.batch_id, timeout=self.timeout_s, poll_interval=0.01
+        )
 
     def plan(self, pose: ViewPose) -> PlanStep:
-        robot = {"x": pose.x, "y": pose.y, "yaw": pose.yaw}
-        out = self._call("POST", "/plan", json={"robot_pose": robot})
-        deferred = tuple(d["fixture_id"] for d in out["deferred"])
-        target, frontier = out["target"], out["frontier"]
+        robot = RobotPose(x=float(pose.x), y=float(pose.y), yaw=float(pose.yaw))
+        out = self._patiently(lambda: self.client.plan(self.scene_id, robot))
+        deferred = tuple(d.fixture_id for d in out.deferred)
+        target, frontier = out.target, out.frontier
         if target is not None:
-            v = target["view"]
+            v = target.view
             return PlanStep(
-                out["decision"],
-                out["reason"],
-                fixture_id=target["fixture_id"],
-                view=(v["x"], v["y"], v["yaw"], v["pitch"]),
+                out.decision,
+                out.reason,
+                fixture_id=target.fixture_id,
+                view=(v.x, v.y, v.yaw, v.pitch),
                 deferred=deferred,
             )
         return PlanStep(
-            out["decision"],
-            out["reason"],
-            goal=None if frontier is None or frontier["goal"] is None else tuple(frontier["goal"]),
-            centroid=None if frontier is None else tuple(frontier["centroid"]),
+            out.decision,
+            out.reason,
+            goal=None if frontier is None or frontier.goal is None else _pair(frontier.goal),
+            centroid=None if frontier is None else _pair(frontier.centroid),
             deferred=deferred,
         )
 
     def inspect(
         self, capture_id: str, fixture_id: str, frames: list[dict[str, Any]], view: ViewPose
     ) -> str:
-        body = {
-            "fixture_id": fixture_id,
-            "frames": frames,
-            "capture_id": capture_id,
-            "view": {"x": view.x, "y": view.y, "yaw": view.yaw},
-        }
-        response = self.client.post(self.scene + "/inspections", json=body)
-        if 400 <= response.status_code < 500 and response.status_code != 429:
-            return f"refused: {response.json().get('detail', response.status_code)}"
-        response.raise_for_status()
-        outcome: str = response.json()["outcome"]
-        return outcome
+        body = InspectionIn.model_validate(
+            {
+                "fixture_id": fixture_id,
+                "frames": frames,
+                "capture_id": capture_id,
+                "view": {"x": float(view.x), "y": float(view.y), "yaw": float(view.yaw)},
+            }
+        )
+        try:
+            return self.client.post_inspection(self.scene_id, body).outcome
+        except ApiError as error:
+            if 400 <= error.status < 500 and error.status != 429:
+                return f"refused: {error.detail}"  # the service appended nothing
+            raise
 
     def graph(self) -> list[Node]:
-        nodes = self._call("GET", "/graph")["nodes"]
-        return [
-            Node(n["id"], n["label"], n["kind"], tuple(n["center"]), n["parent"]) for n in nodes
-        ]
+        nodes = self._patiently(lambda: self.client.graph(self.scene_id)).nodes
+        return [Node(n.id, n.label, n.kind, _triple(n.center), n.parent) for n in nodes]
 
     def tracks(self) -> list[TrackSummary]:
-        response = self.client.get(self.scene + "/tracks")
-        response.raise_for_status()
         return [
             TrackSummary(
-                t["track_id"],
-                t["label"],
-                t["kind"],
-                t["state"],
-                (t["center"][0], t["center"][1], t["center"][2]),
-                t["parent"],
-                t["visible_misses"],
+                t.track_id, t.label, t.kind, t.state, _triple(t.center), t.parent, t.visible_misses
             )
-            for t in response.json()
+            for t in self._patiently(lambda: self.client.tracks(self.scene_id))
         ]
 
     def occupancy(self) -> dict[str, Any]:
-        return Occupancy.model_validate(self._call("GET", "/occupancy")).model_dump()
+        return self._patiently(lambda: self.client.occupancy(self.scene_id)).model_dump()
 
     def queue(self) -> list[str]:
-        return [f["fixture_id"] for f in self._call("GET", "/inspection-queue")["fixtures"]]
+        fixtures = self._patiently(lambda: self.client.inspection_queue(self.scene_id))
+        return [f.fixture_id for f in fixtures]
+
+
+def _pair(values: list[float]) -> tuple[float, float]:
+    return (values[0], values[1])
+
+
+def _triple(values: list[float]) -> tuple[float, float, float]:
+    return (values[0], values[1], values[2])

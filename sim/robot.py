@@ -12,11 +12,13 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TypeVar
 
 import httpx
 from tqdm import tqdm
 
+from api_schema import BatchIn, BatchStatus
+from pbdag_client import Client
 from sim import DEMO_SCENARIO
 from sim.scenario import load_scenario
 from sim.stream import iter_frames, iter_wire_batches
@@ -24,11 +26,10 @@ from sim.stream import iter_frames, iter_wire_batches
 CONNECT_ATTEMPTS = 6  # with doubling from 0.2 s: about 6 s for the service to come up
 FIRST_BACKOFF_SECONDS = 0.2
 
+T = TypeVar("T")
 
-def _with_retries(
-    send: Callable[[], httpx.Response],
-    retry_on: tuple[type[Exception], ...],
-) -> httpx.Response:
+
+def _with_retries(send: Callable[[], T], retry_on: tuple[type[Exception], ...]) -> T:
     """Call `send`, retrying with doubling backoff while the service is unreachable."""
     backoff = FIRST_BACKOFF_SECONDS
     for attempt in range(CONNECT_ATTEMPTS):
@@ -42,33 +43,22 @@ def _with_retries(
     raise AssertionError("unreachable")  # the loop either returns or re-raises
 
 
-def _expect(response: httpx.Response, status: int, what: str) -> httpx.Response:
-    """The response if it has the expected status, else a RuntimeError naming the request."""
-    if response.status_code != status:
-        raise RuntimeError(
-            f"{what}: expected HTTP {status}, got {response.status_code}: {response.text[:500]}"
-        )
-    return response
-
-
-def create_scene(client: httpx.Client, base_url: str, scene_name: str) -> str:
+def create_scene(client: Client, scene_name: str) -> str:
     """POST /v1/scenes and return the new scene's id."""
     # Only connection failures are retried: the request never reached the service, so a
     # retry cannot create a second scene.
-    response = _with_retries(
-        lambda: client.post(f"{base_url}/v1/scenes", json={"name": scene_name}),
+    scene = _with_retries(
+        lambda: client.create_scene(scene_name),
         retry_on=(httpx.ConnectError, httpx.ConnectTimeout),
     )
-    return str(_expect(response, 201, "create scene").json()["id"])
+    return scene.id
 
 
-def post_batch(client: httpx.Client, base_url: str, scene_id: str, batch: dict[str, Any]) -> None:
+def post_batch(client: Client, scene_id: str, batch: BatchIn) -> BatchStatus:
     """POST one batch; any transport error is retried since batch_id makes the call idempotent."""
-    response = _with_retries(
-        lambda: client.post(f"{base_url}/v1/scenes/{scene_id}/batches", json=batch),
-        retry_on=(httpx.TransportError,),
+    return _with_retries(
+        lambda: client.post_batch(scene_id, batch), retry_on=(httpx.TransportError,)
     )
-    _expect(response, 202, f"post batch {batch['batch_id']}")
 
 
 def run_robot(
@@ -81,20 +71,21 @@ def run_robot(
     seed: int = 7,
     pace_seconds: float = 0.0,
     progress: bool = True,
-    client: httpx.Client | None = None,
+    client: Client | None = None,
+    token: str | None = None,
 ) -> str:
     """Create a scene, stream the scenario into it batch by batch, and return the scene id.
 
     `frames` shortens (or stretches) the scenario with its story intact (`load_scenario`).
+    Without a `client`, one on `base_url` (with `token`) is opened and closed here.
     """
     if frames_per_batch < 1:
         raise ValueError("frames_per_batch must be at least 1")
     scenario = load_scenario(scenario_path, frames=frames)
-    base_url = base_url.rstrip("/")
     own_client = client is None
-    http = client if client is not None else httpx.Client(timeout=30.0)
+    http = client if client is not None else Client(base_url, token, timeout=30.0)
     try:
-        scene_id = create_scene(http, base_url, scene_name)
+        scene_id = create_scene(http, scene_name)
         n_batches = -(-scenario.frames // frames_per_batch)
         batches = iter_wire_batches(scenario, seed, iter_frames(scenario, seed), frames_per_batch)
         progress_bar = tqdm(
@@ -106,7 +97,7 @@ def run_robot(
         )
         with progress_bar:
             for batch_index, (_, batch) in enumerate(batches):
-                post_batch(http, base_url, scene_id, batch)
+                post_batch(http, scene_id, BatchIn.model_validate(batch))
                 progress_bar.set_postfix(batch=f"{batch_index + 1}/{n_batches}", refresh=False)
                 progress_bar.update(len(batch["frames"]))
                 if pace_seconds > 0:
@@ -135,8 +126,7 @@ def main(argv: list[str] | None = None) -> None:
         help="bearer token with the write scope (default: $PBDAG_TOKEN)",
     )
     args = parser.parse_args(argv)
-    headers = {"Authorization": f"Bearer {args.token}"} if args.token else {}
-    with httpx.Client(timeout=30.0, headers=headers) as client:
+    with Client(args.url, args.token, timeout=30.0) as client:
         scene_id = run_robot(
             args.url,
             scenario_path=args.scenario,

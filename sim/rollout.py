@@ -25,17 +25,18 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import httpx
 import numpy as np
 import numpy.typing as npt
 
 from core.params import Params
 from core.plan_ledger import ViewPose
+from pbdag_client import Client
 from sim.camera import look_at
 from sim.detector_model import RealisticDetector
 from sim.free_space import FreeSpace
@@ -308,7 +309,9 @@ def main(argv: list[str] | None = None) -> None:
     scenario = load_scenario(arguments.scenario)
     memory: Memory
     if arguments.via_service:
-        memory = ServiceMemory(httpx.Client(base_url=arguments.via_service), scenario.name)
+        # A service that wants a token reads it from $PBDAG_TOKEN, as the robot does.
+        client = Client(arguments.via_service, os.environ.get("PBDAG_TOKEN"), timeout=60.0)
+        memory = ServiceMemory(client, scenario.name)
     else:
         memory = InProcessMemory(scenario.name)
     result = rollout(scenario, arguments.seed, memory, via_service=bool(arguments.via_service))

@@ -32,6 +32,23 @@ FORBIDDEN = {
     # other way round, and neither depends on the benchmarks.
     "sim": {"evaluation", "bench", "tests"},
     "evaluation": {"bench", "tests"},
+    # The client a robot team installs: the wire models and HTTP only, never the service.
+    "pbdag_client": {
+        "core",
+        "service",
+        "sim",
+        "evaluation",
+        "bench",
+        "tests",
+        "sqlalchemy",
+        "fastapi",
+        "uvicorn",
+        "alembic",
+        "psycopg",
+        "scipy",
+        "open3d",
+        "pycocotools",
+    },
 }
 # Packages whose module graph must stay acyclic (checked module by module, not just by package).
 ACYCLIC = ("sim", "evaluation")

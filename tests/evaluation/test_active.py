@@ -23,7 +23,7 @@ from service.cli import main
 from sim.memories import InProcessMemory, Node, ServiceMemory
 from sim.rollout import rollout
 from sim.scenario import scenario_from_dict
-from tests.clients import local_client
+from tests.clients import local_pbdag_client
 
 # A 5 m x 4 m room: two fixtures to inspect (a table, a counter), one that is not inspected
 # (a sofa), four fine objects. The robot starts in the middle, facing the table.
@@ -100,7 +100,7 @@ def run_row_like(result: Any) -> tuple[dict[str, Any], Any]:
 def test_the_rollout_through_the_http_api_decides_as_in_process(container: Container) -> None:
     scenario = scenario_from_dict(copy.deepcopy(SMALL))
     local = rollout(scenario, 17, InProcessMemory("small"))
-    with local_client(create_app(container, run_worker=True)) as client:
+    with local_pbdag_client(create_app(container, run_worker=True)) as client:
         remote = rollout(scenario, 17, ServiceMemory(client, "small"), via_service=True)
     assert [d["decision"] for d in remote.decisions] == [d["decision"] for d in local.decisions]
     assert [c.fixture_id for c in remote.captures] == [c.fixture_id for c in local.captures]

@@ -14,7 +14,7 @@ from service.bootstrap import build_container
 from service.settings import Settings
 from sim.scenario import load_scenario
 from sim.stream import SimRun, simulate, wire_batches
-from tests.clients import local_client
+from tests.clients import local_pbdag_client
 
 HOTEL = Path(__file__).resolve().parents[2] / "sim" / "scenarios" / "hotel-suite.yaml"
 
@@ -33,7 +33,7 @@ def test_in_process_and_via_service_give_the_same_events_and_graphs(
     pbdag = method_named("PBD-AG")
     local = run_in_process(pbdag, batches)
     container = build_container(Settings(data_dir=tmp_path, allow_anonymous_local=True))
-    with local_client(create_app(container, run_worker=True)) as client:
+    with local_pbdag_client(create_app(container, run_worker=True)) as client:
         remote = run_via_service(pbdag, batches, client)
     key = [(e.frame, e.type, e.track_id, dict(e.details)) for e in local.events]
     assert key and key == [(e.frame, e.type, e.track_id, dict(e.details)) for e in remote.events]

@@ -14,6 +14,7 @@ from PIL import Image
 
 import sim.robot as robot
 from api_schema import BatchIn
+from pbdag_client import Client, InvalidRequest
 from sim import DEMO_SCENARIO
 from sim.detector import FIXTURE_VOCABULARY
 from sim.scenario import load_scenario
@@ -22,8 +23,40 @@ from sim.stream import simulate, wire_batches
 SCENE_ID = "scene-42"
 
 
+def scene_answer(name: str) -> dict[str, Any]:
+    """What the service answers to a new scene."""
+    return {"id": SCENE_ID, "name": name, "head_seq": 0, "created_at": 0.0, "params": {}}
+
+
+def batch_answer(body: dict[str, Any]) -> dict[str, Any]:
+    """What the service answers to an accepted batch."""
+    return {
+        "batch_id": body["batch_id"],
+        "scene_id": SCENE_ID,
+        "status": "queued",
+        "attempts": 0,
+        "frame_count": len(body["frames"]),
+        "content_sha256": "0" * 64,
+        "first_seq": None,
+        "last_seq": None,
+        "error": None,
+        "received_at": 0.0,
+        "finished_at": None,
+    }
+
+
+INVALID = {
+    "type": "/problems/invalid-observation",
+    "title": "Invalid observation",
+    "status": 422,
+    "detail": "frames[0].pose: last row must be [0, 0, 0, 1]",
+    "field": "frames[0].pose",
+    "errors": [{"field": "frames[0].pose", "reason": "last row must be [0, 0, 0, 1]"}],
+}
+
+
 class FakeService:
-    """Records requests and answers like the real service would (201 / 202)."""
+    """Records requests and answers like the real service would (201 / 202 / a problem)."""
 
     def __init__(self, connect_failures: int = 0, batch_status: int = 202) -> None:
         self.connect_failures = connect_failures
@@ -38,16 +71,18 @@ class FakeService:
         body = json.loads(request.content)
         if request.method == "POST" and request.url.path == "/v1/scenes":
             self.scene_requests.append(body)
-            return httpx.Response(201, json={"id": SCENE_ID})
+            return httpx.Response(201, json=scene_answer(str(body["name"])))
         if request.method == "POST" and request.url.path == f"/v1/scenes/{SCENE_ID}/batches":
             self.batches.append(body)
-            return httpx.Response(self.batch_status, json={"accepted": True})
+            if self.batch_status == 422:
+                return httpx.Response(422, json=INVALID)
+            return httpx.Response(self.batch_status, json=batch_answer(body))
         return httpx.Response(404, json={"detail": "not found"})
 
 
-def client_for(service: FakeService) -> httpx.Client:
-    """An httpx client whose transport is the fake service."""
-    return httpx.Client(transport=httpx.MockTransport(service), base_url="http://robot-test")
+def client_for(service: FakeService) -> Client:
+    """A PBD-AG client whose transport is the fake service."""
+    return Client("http://robot-test", transport=httpx.MockTransport(service))
 
 
 def test_run_creates_a_scene_and_posts_every_frame_in_batches() -> None:
@@ -125,5 +160,6 @@ def test_unreachable_service_gives_up(monkeypatch: pytest.MonkeyPatch) -> None:
 
 def test_rejected_batch_is_an_error() -> None:
     service = FakeService(batch_status=422)
-    with client_for(service) as client, pytest.raises(RuntimeError, match="422"):
+    with client_for(service) as client, pytest.raises(InvalidRequest) as raised:
         robot.run_robot("", frames=1, progress=False, client=client)
+    assert raised.value.status == 422 and raised.value.field == "frames[0].pose"

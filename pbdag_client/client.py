@@ -1,0 +1,724 @@
+"""`Client` and `AsyncClient`: every route of the v1 API, typed with the `api_schema` models.
+
+Each route is described once (`_Call`: method, path, query, body and how to read the answer);
+the two clients only differ in how they send it. Error answers raise the typed exceptions of
+`pbdag_client.errors`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import AsyncIterator, Callable, Iterator, Mapping
+from dataclasses import dataclass
+from typing import Any, Generic, Literal, TypeVar
+from urllib.parse import quote
+
+import httpx
+from pydantic import BaseModel, TypeAdapter
+
+from api_schema import (
+    BaselineList,
+    BaselinePackage,
+    BaselineRef,
+    BaselineSummary,
+    BatchIn,
+    BatchStatus,
+    CommandResult,
+    Delta,
+    EventOut,
+    EventPage,
+    Explanation,
+    Graph,
+    Health,
+    Inspection,
+    InspectionIn,
+    InspectionList,
+    InspectionQueue,
+    InspectionQueueItem,
+    Occupancy,
+    PlanIn,
+    PlanOut,
+    RobotPose,
+    Scene,
+    SceneCreate,
+    SceneList,
+    TrackBelief,
+    VerdictIn,
+    VerificationItem,
+    VerificationList,
+)
+from pbdag_client.errors import BatchDead, BatchTimeout, RateLimited, problem_error
+
+__all__ = ["DEFAULT_TIMEOUT_S", "AsyncClient", "Client"]
+
+DEFAULT_TIMEOUT_S = 30.0
+EVENTS_PAGE_SIZE = 1000  # the largest page the service serves
+FINISHED = ("done", "dead")
+
+T = TypeVar("T")
+M = TypeVar("M", bound=BaseModel)
+Query = dict[str, str | int | float]
+_TRACKS = TypeAdapter(list[TrackBelief])
+
+
+@dataclass(frozen=True)
+class _Call(Generic[T]):
+    """One request of the API and how to read its answer."""
+
+    method: str
+    path: str
+    read: Callable[[httpx.Response], T]
+    query: Query | None = None
+    body: BaseModel | None = None
+    accept: str = "application/json"
+
+
+def _model(cls: type[M]) -> Callable[[httpx.Response], M]:
+    return lambda response: cls.model_validate_json(response.content)
+
+
+def _segment(value: str | int) -> str:
+    """A path segment, percent-encoded."""
+    return quote(str(value), safe="")
+
+
+def _scene(scene_id: str) -> str:
+    return f"/v1/scenes/{_segment(scene_id)}"
+
+
+def _query(**values: str | int | float | None) -> Query:
+    """Query parameters, leaving out those not given."""
+    return {name: value for name, value in values.items() if value is not None}
+
+
+class _Routes:
+    """The v1 API's routes as `_Call`s (shared by both clients)."""
+
+    @staticmethod
+    def health() -> _Call[Health]:
+        return _Call("GET", "/healthz", _model(Health))
+
+    @staticmethod
+    def create_scene(body: SceneCreate) -> _Call[Scene]:
+        return _Call("POST", "/v1/scenes", _model(Scene), body=body)
+
+    @staticmethod
+    def scenes() -> _Call[list[Scene]]:
+        return _Call("GET", "/v1/scenes", lambda r: SceneList.model_validate_json(r.content).scenes)
+
+    @staticmethod
+    def scene(scene_id: str) -> _Call[Scene]:
+        return _Call("GET", _scene(scene_id), _model(Scene))
+
+    @staticmethod
+    def post_batch(scene_id: str, batch: BatchIn) -> _Call[BatchStatus]:
+        return _Call("POST", f"{_scene(scene_id)}/batches", _model(BatchStatus), body=batch)
+
+    @staticmethod
+    def batch(scene_id: str, batch_id: str) -> _Call[BatchStatus]:
+        path = f"{_scene(scene_id)}/batches/{_segment(batch_id)}"
+        return _Call("GET", path, _model(BatchStatus))
+
+    @staticmethod
+    def requeue_batch(scene_id: str, batch_id: str) -> _Call[BatchStatus]:
+        path = f"{_scene(scene_id)}/batches/{_segment(batch_id)}/requeue"
+        return _Call("POST", path, _model(BatchStatus))
+
+    @staticmethod
+    def graph(
+        scene_id: str,
+        as_of: int | None,
+        include: Literal["published", "all"],
+        parent: str | None,
+        label: str | None,
+    ) -> _Call[Graph]:
+        query = _query(as_of=as_of, include=include, parent=parent, label=label)
+        return _Call("GET", f"{_scene(scene_id)}/graph", _model(Graph), query)
+
+    @staticmethod
+    def events_page(
+        scene_id: str, after: int, limit: int, track_id: str | None, type: str | None
+    ) -> _Call[EventPage]:
+        query = _query(after=after, limit=limit, track_id=track_id, type=type)
+        return _Call("GET", f"{_scene(scene_id)}/events", _model(EventPage), query)
+
+    @staticmethod
+    def tracks(
+        scene_id: str, label: str | None, state: str | None, parent: str | None
+    ) -> _Call[list[TrackBelief]]:
+        query = _query(label=label, state=state, parent=parent)
+        return _Call(
+            "GET", f"{_scene(scene_id)}/tracks", lambda r: _TRACKS.validate_json(r.content), query
+        )
+
+    @staticmethod
+    def track(scene_id: str, track_id: str, as_of: int | None) -> _Call[TrackBelief]:
+        path = f"{_scene(scene_id)}/tracks/{_segment(track_id)}"
+        return _Call("GET", path, _model(TrackBelief), _query(as_of=as_of))
+
+    @staticmethod
+    def explain(scene_id: str, track_id: str) -> _Call[Explanation]:
+        path = f"{_scene(scene_id)}/tracks/{_segment(track_id)}/explain"
+        return _Call("GET", path, _model(Explanation))
+
+    @staticmethod
+    def verifications(
+        scene_id: str, status: Literal["pending", "all"]
+    ) -> _Call[list[VerificationItem]]:
+        return _Call(
+            "GET",
+            f"{_scene(scene_id)}/verifications",
+            lambda r: VerificationList.model_validate_json(r.content).verifications,
+            _query(status=status),
+        )
+
+    @staticmethod
+    def post_verdict(scene_id: str, track_id: str, verdict: VerdictIn) -> _Call[CommandResult]:
+        path = f"{_scene(scene_id)}/tracks/{_segment(track_id)}/verification"
+        return _Call("POST", path, _model(CommandResult), body=verdict)
+
+    @staticmethod
+    def freeze_baseline(scene_id: str) -> _Call[BaselinePackage]:
+        return _Call("POST", f"{_scene(scene_id)}/baselines", _model(BaselinePackage))
+
+    @staticmethod
+    def baselines(scene_id: str) -> _Call[list[BaselineSummary]]:
+        return _Call(
+            "GET",
+            f"{_scene(scene_id)}/baselines",
+            lambda r: BaselineList.model_validate_json(r.content).baselines,
+        )
+
+    @staticmethod
+    def baseline(scene_id: str, version: int) -> _Call[BaselinePackage]:
+        path = f"{_scene(scene_id)}/baselines/{_segment(version)}"
+        return _Call("GET", path, _model(BaselinePackage))
+
+    @staticmethod
+    def delta(scene_id: str, baseline: int, after: int | None, limit: int) -> _Call[Delta]:
+        query = _query(baseline=baseline, after=after, limit=limit)
+        return _Call("GET", f"{_scene(scene_id)}/delta", _model(Delta), query)
+
+    @staticmethod
+    def post_inspection(scene_id: str, inspection: InspectionIn) -> _Call[Inspection]:
+        return _Call("POST", f"{_scene(scene_id)}/inspections", _model(Inspection), body=inspection)
+
+    @staticmethod
+    def inspections(scene_id: str) -> _Call[list[Inspection]]:
+        return _Call(
+            "GET",
+            f"{_scene(scene_id)}/inspections",
+            lambda r: InspectionList.model_validate_json(r.content).inspections,
+        )
+
+    @staticmethod
+    def inspection_queue(scene_id: str) -> _Call[list[InspectionQueueItem]]:
+        return _Call(
+            "GET",
+            f"{_scene(scene_id)}/inspection-queue",
+            lambda r: InspectionQueue.model_validate_json(r.content).fixtures,
+        )
+
+    @staticmethod
+    def plan(scene_id: str, robot_pose: RobotPose) -> _Call[PlanOut]:
+        body = PlanIn(robot_pose=robot_pose)
+        return _Call("POST", f"{_scene(scene_id)}/plan", _model(PlanOut), body=body)
+
+    @staticmethod
+    def preview_plan(
+        scene_id: str, x: float, y: float, yaw: float, as_of: int | None
+    ) -> _Call[PlanOut]:
+        query = _query(x=x, y=y, yaw=yaw, as_of=as_of)
+        return _Call("GET", f"{_scene(scene_id)}/plan", _model(PlanOut), query)
+
+    @staticmethod
+    def occupancy(scene_id: str, as_of: int | None) -> _Call[Occupancy]:
+        query = _query(as_of=as_of, format="json")
+        return _Call("GET", f"{_scene(scene_id)}/occupancy", _model(Occupancy), query)
+
+    @staticmethod
+    def occupancy_png(scene_id: str, as_of: int | None) -> _Call[bytes]:
+        query = _query(as_of=as_of, format="png")
+        return _Call(
+            "GET", f"{_scene(scene_id)}/occupancy", lambda r: r.content, query, accept="image/png"
+        )
+
+
+def _scene_create(
+    name: str, params: Mapping[str, Any] | None, baseline: BaselineRef | None
+) -> SceneCreate:
+    given: dict[str, Any] = {"name": name}
+    if params is not None:
+        given["params"] = dict(params)
+    if baseline is not None:
+        given["baseline"] = baseline
+    return SceneCreate(**given)
+
+
+def _headers(token: str | None) -> dict[str, str]:
+    return {"Authorization": f"Bearer {token}"} if token else {}
+
+
+def _request(http: httpx.Client | httpx.AsyncClient, call: _Call[Any]) -> httpx.Request:
+    # Fields left at their defaults stay off the wire: the service applies the same defaults.
+    content = None if call.body is None else call.body.model_dump_json(exclude_unset=True).encode()
+    headers = {"Accept": call.accept}
+    if content is not None:
+        headers["Content-Type"] = "application/json"
+    return http.build_request(
+        call.method, call.path, params=call.query, content=content, headers=headers
+    )
+
+
+def _answer(call: _Call[T], response: httpx.Response) -> T:
+    if response.is_error:
+        raise problem_error(response)
+    return call.read(response)
+
+
+def _poll_wait(error: RateLimited, poll_interval_s: float) -> float:
+    """How long to wait after a 429 while polling."""
+    retry_after = error.retry_after
+    return max(poll_interval_s, 1.0 if retry_after is None else retry_after)
+
+
+class Client:
+    """The PBD-AG API over HTTP, synchronously.
+
+    `base_url` is the service's root (`http://127.0.0.1:8000`); `token` a bearer token (none for
+    a service that allows anonymous local access); `transport` any httpx transport (tests).
+    Use it as a context manager, or `close()` it.
+    """
+
+    def __init__(
+        self,
+        base_url: str,
+        token: str | None = None,
+        *,
+        timeout: float = DEFAULT_TIMEOUT_S,
+        transport: httpx.BaseTransport | None = None,
+    ) -> None:
+        self.base_url = base_url.rstrip("/")
+        self._http = httpx.Client(
+            base_url=self.base_url, headers=_headers(token), timeout=timeout, transport=transport
+        )
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the connections."""
+        self._http.close()
+
+    def _send(self, call: _Call[T]) -> T:
+        return _answer(call, self._http.send(_request(self._http, call)))
+
+    def health(self) -> Health:
+        """`GET /healthz`: liveness, backend, batches per status."""
+        return self._send(_Routes.health())
+
+    # --- scenes -------------------------------------------------------------------------------
+
+    def create_scene(
+        self,
+        name: str,
+        *,
+        params: Mapping[str, Any] | None = None,
+        baseline: BaselineRef | None = None,
+    ) -> Scene:
+        """`POST /v1/scenes`: a new scene; `params` override core/params.py's defaults."""
+        return self._send(_Routes.create_scene(_scene_create(name, params, baseline)))
+
+    def scenes(self) -> list[Scene]:
+        """`GET /v1/scenes`: every scene."""
+        return self._send(_Routes.scenes())
+
+    def scene(self, scene_id: str) -> Scene:
+        """`GET /v1/scenes/{id}`: one scene with its head seq and parameters."""
+        return self._send(_Routes.scene(scene_id))
+
+    # --- batches ------------------------------------------------------------------------------
+
+    def post_batch(self, scene_id: str, batch: BatchIn) -> BatchStatus:
+        """`POST .../batches`: queue a batch (status `queued`); the same batch again returns the
+        original's status, new content under its batch_id raises `Conflict`."""
+        return self._send(_Routes.post_batch(scene_id, batch))
+
+    def batch(self, scene_id: str, batch_id: str) -> BatchStatus:
+        """`GET .../batches/{batch_id}`: where a batch is, and the seqs it appended."""
+        return self._send(_Routes.batch(scene_id, batch_id))
+
+    def requeue_batch(self, scene_id: str, batch_id: str) -> BatchStatus:
+        """`POST .../batches/{batch_id}/requeue` (admin): a dead batch back in the queue."""
+        return self._send(_Routes.requeue_batch(scene_id, batch_id))
+
+    def wait_for_batch(
+        self,
+        scene_id: str,
+        batch_id: str,
+        *,
+        timeout: float = 120.0,
+        poll_interval: float = 0.05,
+    ) -> BatchStatus:
+        """Poll until the batch is `done` (returned) or `dead` (`BatchDead`); `BatchTimeout`
+        when it is neither after `timeout` seconds. A 429 while polling waits its Retry-After."""
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                status = self.batch(scene_id, batch_id)
+            except RateLimited as error:
+                if time.monotonic() >= deadline:
+                    raise
+                time.sleep(_poll_wait(error, poll_interval))
+                continue
+            if status.status == "done":
+                return status
+            if status.status == "dead":
+                raise BatchDead(status)
+            if time.monotonic() >= deadline:
+                raise BatchTimeout(status, timeout)
+            time.sleep(poll_interval)
+
+    # --- reading the memory -------------------------------------------------------------------
+
+    def graph(
+        self,
+        scene_id: str,
+        *,
+        as_of: int | None = None,
+        include: Literal["published", "all"] = "published",
+        parent: str | None = None,
+        label: str | None = None,
+    ) -> Graph:
+        """`GET .../graph`: the published graph (every track with include="all") at `as_of`."""
+        return self._send(_Routes.graph(scene_id, as_of, include, parent, label))
+
+    def events_page(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        limit: int = 100,
+        track_id: str | None = None,
+        type: str | None = None,
+    ) -> EventPage:
+        """`GET .../events`: one page of the log after a seq cursor."""
+        return self._send(_Routes.events_page(scene_id, after, limit, track_id, type))
+
+    def events(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        up_to: int | None = None,
+        track_id: str | None = None,
+        type: str | None = None,
+        page_size: int = EVENTS_PAGE_SIZE,
+    ) -> Iterator[EventOut]:
+        """Every event with after < seq (<= up_to), following the pages to the end."""
+        cursor: int | None = after
+        while cursor is not None:
+            page = self.events_page(
+                scene_id, after=cursor, limit=page_size, track_id=track_id, type=type
+            )
+            for event in page.events:
+                if up_to is not None and event.seq > up_to:
+                    return
+                yield event
+            cursor = page.next_after
+
+    def tracks(
+        self,
+        scene_id: str,
+        *,
+        label: str | None = None,
+        state: str | None = None,
+        parent: str | None = None,
+    ) -> list[TrackBelief]:
+        """`GET .../tracks`: current tracks from the projection, filtered."""
+        return self._send(_Routes.tracks(scene_id, label, state, parent))
+
+    def track(self, scene_id: str, track_id: str, *, as_of: int | None = None) -> TrackBelief:
+        """`GET .../tracks/{track_id}`: the full belief of one track at `as_of`."""
+        return self._send(_Routes.track(scene_id, track_id, as_of))
+
+    def explain(self, scene_id: str, track_id: str) -> Explanation:
+        """`GET .../tracks/{track_id}/explain`: why the track is in its state, from the log."""
+        return self._send(_Routes.explain(scene_id, track_id))
+
+    # --- verification, baselines, inspections, plan --------------------------------------------
+
+    def verifications(
+        self, scene_id: str, *, status: Literal["pending", "all"] = "pending"
+    ) -> list[VerificationItem]:
+        """`GET .../verifications`: fixtures waiting for a verdict (or every one with "all")."""
+        return self._send(_Routes.verifications(scene_id, status))
+
+    def post_verdict(self, scene_id: str, track_id: str, verdict: VerdictIn) -> CommandResult:
+        """`POST .../tracks/{track_id}/verification`: record a verdict."""
+        return self._send(_Routes.post_verdict(scene_id, track_id, verdict))
+
+    def freeze_baseline(self, scene_id: str) -> BaselinePackage:
+        """`POST .../baselines`: freeze the confirmed fixtures into a versioned package."""
+        return self._send(_Routes.freeze_baseline(scene_id))
+
+    def baselines(self, scene_id: str) -> list[BaselineSummary]:
+        """`GET .../baselines`: every frozen baseline."""
+        return self._send(_Routes.baselines(scene_id))
+
+    def baseline(self, scene_id: str, version: int) -> BaselinePackage:
+        """`GET .../baselines/{version}`: one package."""
+        return self._send(_Routes.baseline(scene_id, version))
+
+    def delta(
+        self, scene_id: str, baseline: int, *, after: int | None = None, limit: int = 100
+    ) -> Delta:
+        """`GET .../delta`: a page of the events after a baseline's freeze."""
+        return self._send(_Routes.delta(scene_id, baseline, after, limit))
+
+    def post_inspection(self, scene_id: str, inspection: InspectionIn) -> Inspection:
+        """`POST .../inspections`: one fixture-centered capture."""
+        return self._send(_Routes.post_inspection(scene_id, inspection))
+
+    def inspections(self, scene_id: str) -> list[Inspection]:
+        """`GET .../inspections`: the capture ledger."""
+        return self._send(_Routes.inspections(scene_id))
+
+    def inspection_queue(self, scene_id: str) -> list[InspectionQueueItem]:
+        """`GET .../inspection-queue`: unresolved fixtures, most uncertain first."""
+        return self._send(_Routes.inspection_queue(scene_id))
+
+    def plan(self, scene_id: str, robot_pose: RobotPose) -> PlanOut:
+        """`POST .../plan`: what to do next, decided on the head (may lock a target)."""
+        return self._send(_Routes.plan(scene_id, robot_pose))
+
+    def preview_plan(
+        self, scene_id: str, x: float, y: float, yaw: float = 0.0, *, as_of: int | None = None
+    ) -> PlanOut:
+        """`GET .../plan`: the plan at `as_of` for a robot at (x, y, yaw), without locking."""
+        return self._send(_Routes.preview_plan(scene_id, x, y, yaw, as_of))
+
+    def occupancy(self, scene_id: str, *, as_of: int | None = None) -> Occupancy:
+        """`GET .../occupancy`: the occupancy map A_t at `as_of`, run-length encoded."""
+        return self._send(_Routes.occupancy(scene_id, as_of))
+
+    def occupancy_png(self, scene_id: str, *, as_of: int | None = None) -> bytes:
+        """`GET .../occupancy?format=png`: the map as an 8-bit grey PNG."""
+        return self._send(_Routes.occupancy_png(scene_id, as_of))
+
+
+class AsyncClient:
+    """The PBD-AG API over HTTP, for asyncio: the methods of `Client`, awaited."""
+
+    def __init__(
+        self,
+        base_url: str,
+        token: str | None = None,
+        *,
+        timeout: float = DEFAULT_TIMEOUT_S,
+        transport: httpx.AsyncBaseTransport | None = None,
+    ) -> None:
+        self.base_url = base_url.rstrip("/")
+        self._http = httpx.AsyncClient(
+            base_url=self.base_url, headers=_headers(token), timeout=timeout, transport=transport
+        )
+
+    async def __aenter__(self) -> AsyncClient:
+        return self
+
+    async def __aexit__(self, *exc_info: object) -> None:
+        await self.aclose()
+
+    async def aclose(self) -> None:
+        """Close the connections."""
+        await self._http.aclose()
+
+    async def _send(self, call: _Call[T]) -> T:
+        return _answer(call, await self._http.send(_request(self._http, call)))
+
+    async def health(self) -> Health:
+        """`GET /healthz`."""
+        return await self._send(_Routes.health())
+
+    async def create_scene(
+        self,
+        name: str,
+        *,
+        params: Mapping[str, Any] | None = None,
+        baseline: BaselineRef | None = None,
+    ) -> Scene:
+        """`POST /v1/scenes`."""
+        return await self._send(_Routes.create_scene(_scene_create(name, params, baseline)))
+
+    async def scenes(self) -> list[Scene]:
+        """`GET /v1/scenes`."""
+        return await self._send(_Routes.scenes())
+
+    async def scene(self, scene_id: str) -> Scene:
+        """`GET /v1/scenes/{id}`."""
+        return await self._send(_Routes.scene(scene_id))
+
+    async def post_batch(self, scene_id: str, batch: BatchIn) -> BatchStatus:
+        """`POST .../batches`."""
+        return await self._send(_Routes.post_batch(scene_id, batch))
+
+    async def batch(self, scene_id: str, batch_id: str) -> BatchStatus:
+        """`GET .../batches/{batch_id}`."""
+        return await self._send(_Routes.batch(scene_id, batch_id))
+
+    async def requeue_batch(self, scene_id: str, batch_id: str) -> BatchStatus:
+        """`POST .../batches/{batch_id}/requeue` (admin)."""
+        return await self._send(_Routes.requeue_batch(scene_id, batch_id))
+
+    async def wait_for_batch(
+        self,
+        scene_id: str,
+        batch_id: str,
+        *,
+        timeout: float = 120.0,
+        poll_interval: float = 0.05,
+    ) -> BatchStatus:
+        """Poll until `done` (returned) or `dead` (`BatchDead`); `BatchTimeout` after `timeout`."""
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                status = await self.batch(scene_id, batch_id)
+            except RateLimited as error:
+                if time.monotonic() >= deadline:
+                    raise
+                await asyncio.sleep(_poll_wait(error, poll_interval))
+                continue
+            if status.status == "done":
+                return status
+            if status.status == "dead":
+                raise BatchDead(status)
+            if time.monotonic() >= deadline:
+                raise BatchTimeout(status, timeout)
+            await asyncio.sleep(poll_interval)
+
+    async def graph(
+        self,
+        scene_id: str,
+        *,
+        as_of: int | None = None,
+        include: Literal["published", "all"] = "published",
+        parent: str | None = None,
+        label: str | None = None,
+    ) -> Graph:
+        """`GET .../graph`."""
+        return await self._send(_Routes.graph(scene_id, as_of, include, parent, label))
+
+    async def events_page(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        limit: int = 100,
+        track_id: str | None = None,
+        type: str | None = None,
+    ) -> EventPage:
+        """`GET .../events`: one page."""
+        return await self._send(_Routes.events_page(scene_id, after, limit, track_id, type))
+
+    async def events(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        up_to: int | None = None,
+        track_id: str | None = None,
+        type: str | None = None,
+        page_size: int = EVENTS_PAGE_SIZE,
+    ) -> AsyncIterator[EventOut]:
+        """Every event with after < seq (<= up_to), following the pages (`async for`)."""
+        cursor: int | None = after
+        while cursor is not None:
+            page = await self.events_page(
+                scene_id, after=cursor, limit=page_size, track_id=track_id, type=type
+            )
+            for event in page.events:
+                if up_to is not None and event.seq > up_to:
+                    return
+                yield event
+            cursor = page.next_after
+
+    async def tracks(
+        self,
+        scene_id: str,
+        *,
+        label: str | None = None,
+        state: str | None = None,
+        parent: str | None = None,
+    ) -> list[TrackBelief]:
+        """`GET .../tracks`."""
+        return await self._send(_Routes.tracks(scene_id, label, state, parent))
+
+    async def track(self, scene_id: str, track_id: str, *, as_of: int | None = None) -> TrackBelief:
+        """`GET .../tracks/{track_id}`."""
+        return await self._send(_Routes.track(scene_id, track_id, as_of))
+
+    async def explain(self, scene_id: str, track_id: str) -> Explanation:
+        """`GET .../tracks/{track_id}/explain`."""
+        return await self._send(_Routes.explain(scene_id, track_id))
+
+    async def verifications(
+        self, scene_id: str, *, status: Literal["pending", "all"] = "pending"
+    ) -> list[VerificationItem]:
+        """`GET .../verifications`."""
+        return await self._send(_Routes.verifications(scene_id, status))
+
+    async def post_verdict(self, scene_id: str, track_id: str, verdict: VerdictIn) -> CommandResult:
+        """`POST .../tracks/{track_id}/verification`."""
+        return await self._send(_Routes.post_verdict(scene_id, track_id, verdict))
+
+    async def freeze_baseline(self, scene_id: str) -> BaselinePackage:
+        """`POST .../baselines`."""
+        return await self._send(_Routes.freeze_baseline(scene_id))
+
+    async def baselines(self, scene_id: str) -> list[BaselineSummary]:
+        """`GET .../baselines`."""
+        return await self._send(_Routes.baselines(scene_id))
+
+    async def baseline(self, scene_id: str, version: int) -> BaselinePackage:
+        """`GET .../baselines/{version}`."""
+        return await self._send(_Routes.baseline(scene_id, version))
+
+    async def delta(
+        self, scene_id: str, baseline: int, *, after: int | None = None, limit: int = 100
+    ) -> Delta:
+        """`GET .../delta`."""
+        return await self._send(_Routes.delta(scene_id, baseline, after, limit))
+
+    async def post_inspection(self, scene_id: str, inspection: InspectionIn) -> Inspection:
+        """`POST .../inspections`."""
+        return await self._send(_Routes.post_inspection(scene_id, inspection))
+
+    async def inspections(self, scene_id: str) -> list[Inspection]:
+        """`GET .../inspections`."""
+        return await self._send(_Routes.inspections(scene_id))
+
+    async def inspection_queue(self, scene_id: str) -> list[InspectionQueueItem]:
+        """`GET .../inspection-queue`."""
+        return await self._send(_Routes.inspection_queue(scene_id))
+
+    async def plan(self, scene_id: str, robot_pose: RobotPose) -> PlanOut:
+        """`POST .../plan`."""
+        return await self._send(_Routes.plan(scene_id, robot_pose))
+
+    async def preview_plan(
+        self, scene_id: str, x: float, y: float, yaw: float = 0.0, *, as_of: int | None = None
+    ) -> PlanOut:
+        """`GET .../plan`."""
+        return await self._send(_Routes.preview_plan(scene_id, x, y, yaw, as_of))
+
+    async def occupancy(self, scene_id: str, *, as_of: int | None = None) -> Occupancy:
+        """`GET .../occupancy`."""
+        return await self._send(_Routes.occupancy(scene_id, as_of))
+
+    async def occupancy_png(self, scene_id: str, *, as_of: int | None = None) -> bytes:
+        """`GET .../occupancy?format=png`."""
+        return await self._send(_Routes.occupancy_png(scene_id, as_of))
