@@ -435,7 +435,7 @@ async function loadVerifications() {
       el(
         "li",
         { dataset: { track: item.track_id, label: item.label } },
-        el("strong", {}, item.label),
+        el("strong", { title: "show this track", onclick: () => selectTrack(item.track_id) }, item.label),
         ` ${item.track_id} `,
         el("span", { className: "state" }, `candidates: ${topClasses(item.candidates)}; frame ${item.best_frame || "-"}`),
         el(
