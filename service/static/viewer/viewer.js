@@ -68,7 +68,13 @@ function failed(error) {
 function el(tag, attrs = {}, ...children) {
   const node = document.createElement(tag);
   for (const [name, value] of Object.entries(attrs)) {
-    if (name === "onclick") node.addEventListener("click", value);
+    if (name === "onclick") {
+      node.addEventListener("click", value);
+      if (tag === "li" || tag === "strong") {
+        node.tabIndex = 0; // clickable lines are reachable with the keyboard too
+        node.addEventListener("keydown", (event) => event.key === "Enter" && value(event));
+      }
+    }
     else if (name === "className") node.className = value;
     else if (name === "dataset") Object.assign(node.dataset, value);
     else node.setAttribute(name, value);
