@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo serve test lint format openapi bench eval soak fuzz clean
+.PHONY: setup demo serve test lint format openapi vendor bench eval soak fuzz clean
 
 setup: $(VENV)/.installed
 
@@ -35,6 +35,9 @@ format: setup
 
 openapi: setup  ## regenerate api_schema/openapi.json from the app
 	$(BIN)/pbdag openapi
+
+vendor:  ## refetch the vendored Swagger UI assets from the npm registry (pinned, sha256 checked)
+	bash scripts/vendor-assets.sh
 
 bench: setup  ## the performance benchmarks (figures printed and written to bench/results/)
 	$(BIN)/python -m bench.bench_render

@@ -26,6 +26,7 @@ from service.routes import (
 )
 from service.security import install_security
 from service.states import StateReader
+from service.viewer import install_pages
 from service.worker import WorkerThread
 
 API_VERSION = "1.0.0"
@@ -55,10 +56,13 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
             "and explanations of every removal."
         ),
         lifespan=lifespan,
+        docs_url=None,  # served from the package by install_pages: offline, no CDN
+        redoc_url=None,
     )
     app.state.container = container
     app.state.states = StateReader(container.log)
     install_problem_handlers(app)
+    install_pages(app)  # /docs, /viewer, /static (innermost: their headers on their answers)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
     install_security(app, container)
     install_openapi(app)  # hosts, CORS, tokens, rate limits: before the body limit

@@ -38,6 +38,7 @@ from service.bootstrap import Container
 from service.errors import send_problem
 from service.openapi import OPEN_PATHS
 from service.ratelimit import RateLimiter
+from service.viewer import STATIC_PREFIX, VIEWER_PATH
 
 __all__ = [
     "OPEN_PATHS",
@@ -46,7 +47,15 @@ __all__ = [
     "install_security",
 ]
 
-# Liveness probes must not need a token (they carry none).
+# Static pages and files hold no scene data, and a browser must load the viewer before its user
+# can type a token; the viewer sends the token with every API request.
+OPEN_PAGES = frozenset({VIEWER_PATH})
+OPEN_PREFIXES = (f"{STATIC_PREFIX}/",)
+
+
+def is_open(path: str) -> bool:
+    """True for the paths that need no token: liveness probes, the viewer page, static files."""
+    return path in OPEN_PATHS or path in OPEN_PAGES or path.startswith(OPEN_PREFIXES)
 
 
 # --- Host names -------------------------------------------------------------------------------
@@ -106,8 +115,8 @@ def hosts_when_serving(allowed: Sequence[str], bind_host: str) -> list[str]:
 class AccessControl:
     """Pure ASGI middleware: authenticate, rate-limit and check the method's scope.
 
-    GET/HEAD/OPTIONS need `read`, other methods `write`; OPEN_PATHS need nothing. The principal
-    is left in `request.state.principal` for routes that need more (RequireAdmin).
+    GET/HEAD/OPTIONS need `read`, other methods `write`; open paths (`is_open`) need nothing.
+    The principal is left in `request.state.principal` for routes that need more (RequireAdmin).
     """
 
     def __init__(
@@ -124,7 +133,7 @@ class AccessControl:
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         """Answer 401, 403 or 429 here, before the app reads anything of the request."""
-        if scope["type"] != "http" or _route_path(scope) in OPEN_PATHS:
+        if scope["type"] != "http" or is_open(_route_path(scope)):
             await self.app(scope, receive, send)
             return
         try:

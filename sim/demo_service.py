@@ -88,6 +88,7 @@ def print_summary(client: Client, base_url: str, scene_id: str) -> None:
             f"baseline v{package.version} frozen at seq {package.seq}: {fixtures}; sha256 {package.sha256[:16]}..."
         )
     print("\nWhere to look:")
+    print(f"  viewer          {base_url}/viewer?scene={scene_id}")
     print(f"  API docs        {base_url}/docs")
     print(f"  graph now       {base_url}/v1/scenes/{scene_id}/graph")
     print(f"  graph at seq 40 {base_url}/v1/scenes/{scene_id}/graph?as_of=40")
@@ -139,7 +140,10 @@ def main(argv: list[str] | None = None) -> None:
     if busy is not None:
         print(busy)
     print(f"PBD-AG is serving on {base_url} (SQLite at {settings.resolved_database_url()}).")
-    print(f"Open {base_url}/docs while the simulated robot walks its loop and posts batches.\n")
+    print(
+        f"Open {base_url}/viewer (the map over time) or {base_url}/docs while the simulated "
+        "robot walks its loop and posts batches.\n"
+    )
     scene_id = run_robot(
         base_url, frames=args.frames, frames_per_batch=args.frames_per_batch, pace_seconds=args.pace
     )

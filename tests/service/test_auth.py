@@ -194,10 +194,10 @@ def test_token_creation_rejects_unknown_or_no_scopes_and_empty_names(container: 
 
 def test_healthz_stays_open_and_docs_need_read(container: Container, lan: TestClient) -> None:
     assert lan.get("/healthz").status_code == 200
-    for path in ("/openapi.json", "/docs", "/redoc"):
+    for path in ("/openapi.json", "/docs"):
         problem(lan.get(path), 401)
     token = create_token(container.engine, "viewer", ["read"]).token
-    for path in ("/openapi.json", "/docs", "/redoc"):
+    for path in ("/openapi.json", "/docs"):
         assert lan.get(path, headers=bearer(token)).status_code == 200, path
     document = lan.get("/openapi.json", headers=bearer(token)).json()
     assert document["components"]["securitySchemes"]["bearer"]["scheme"] == "bearer"

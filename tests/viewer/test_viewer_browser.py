@@ -1,0 +1,302 @@
+"""The viewer and /docs in Debian's headless Chromium, against a real `pbdag serve`.
+
+A table (ambiguous: table or desk, so it waits for a verdict), a counter and a mug on the table;
+then the mug is taken away and seen missing until it is removed. Screenshots go to
+test-artifacts/viewer/; the assertions are on the DOM.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import urlsplit
+
+import httpx
+import pytest
+from playwright.sync_api import (
+    Browser,
+    ConsoleMessage,
+    Locator,
+    Page,
+    Route,
+    expect,
+    sync_playwright,
+)
+
+from tests.core.rendered import TABLE_VIEWS
+from tests.e2e.fault_run import free_port, wait_healthy
+from tests.e2e.fixture_world import DISCOVERY, ROOM, wire_batches
+
+pytestmark = pytest.mark.slow
+
+REPO = Path(__file__).resolve().parents[2]
+ARTIFACTS = REPO / "test-artifacts" / "viewer"
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--no-first-run",
+]
+AMBIGUOUS_TABLE = {"table": {"table": 0.50, "desk": 0.48}}
+LOOPBACK = frozenset({"127.0.0.1", "localhost", "::1"})
+TIMEOUT_MS = 20_000
+
+
+@dataclass(frozen=True)
+class DemoScene:
+    url: str
+    scene_id: str
+    head: int
+    mug_id: str
+    removed_at: int
+    last_published: int  # the mug's last seq in the published graph, before misses demoted it
+    table_id: str
+
+
+def chromium_or_skip() -> None:
+    """Skip without Debian's Chromium, except on CI, where make test installs it."""
+    if CHROMIUM.exists():
+        return
+    reason = f"Debian's chromium is not installed at {CHROMIUM} (scripts/system-deps.sh does it)"
+    if os.environ.get("CI"):
+        pytest.fail(reason)
+    pytest.skip(reason)
+
+
+def build_scene(client: httpx.Client) -> DemoScene:
+    """Post the discovery and the removal as batches and wait until every one is done."""
+    scene_id: str = client.post("/v1/scenes", json={"name": "viewer demo"}).json()["id"]
+    bodies = wire_batches(ROOM, DISCOVERY, "d", ambiguity=AMBIGUOUS_TABLE)
+    bodies += wire_batches(ROOM.without("mug"), TABLE_VIEWS * 4, "r", ambiguity=AMBIGUOUS_TABLE)
+    for body in bodies:
+        response = client.post(f"/v1/scenes/{scene_id}/batches", json=body)
+        assert response.status_code == 202, response.text
+    deadline = time.monotonic() + 120
+    last = bodies[-1]["batch_id"]
+    while client.get(f"/v1/scenes/{scene_id}/batches/{last}").json()["status"] != "done":
+        assert time.monotonic() < deadline, "the batches were not processed in time"
+        time.sleep(0.2)
+    graph = client.get(f"/v1/scenes/{scene_id}/graph", params={"include": "all"}).json()
+    by_label = {node["label"]: node for node in graph["nodes"]}
+    assert by_label["mug"]["state"] == "removed"
+    assert graph["pending_verifications"] == [by_label["table"]["id"]]
+    removals = client.get(
+        f"/v1/scenes/{scene_id}/events",
+        params={"type": "remove", "track_id": by_label["mug"]["id"]},
+    ).json()["events"]
+    assert len(removals) == 1
+    doubted = client.get(
+        f"/v1/scenes/{scene_id}/events",
+        params={"type": "demote", "track_id": by_label["mug"]["id"]},
+    ).json()["events"]
+    last_published = (doubted[0]["seq"] if doubted else removals[0]["seq"]) - 1
+    published = client.get(f"/v1/scenes/{scene_id}/graph", params={"as_of": last_published}).json()
+    assert by_label["mug"]["id"] in {node["id"] for node in published["nodes"]}
+    return DemoScene(
+        url=str(client.base_url).rstrip("/"),
+        scene_id=scene_id,
+        head=graph["seq"],
+        mug_id=by_label["mug"]["id"],
+        removed_at=removals[0]["seq"],
+        last_published=last_published,
+        table_id=by_label["table"]["id"],
+    )
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory: pytest.TempPathFactory) -> Iterator[DemoScene]:
+    """`pbdag serve` on a free loopback port (SQLite in a temporary data dir) with the scene."""
+    chromium_or_skip()
+    data = tmp_path_factory.mktemp("viewer")
+    port = free_port()
+    env = {
+        **os.environ,
+        "PBDAG_DATA_DIR": str(data / "data"),
+        "PBDAG_ALLOW_ANONYMOUS_LOCAL": "true",  # the browser is on 127.0.0.1, as a local user
+    }
+    env.pop("PBDAG_DATABASE_URL", None)
+    log = data / "service.log"
+    with log.open("ab") as handle:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "service.cli", "serve", "--port", str(port)],
+            env=env,
+            cwd=REPO,
+            stdout=handle,
+            stderr=subprocess.STDOUT,
+        )
+    url = f"http://127.0.0.1:{port}"
+    try:
+        wait_healthy(url)
+        with httpx.Client(base_url=url, timeout=30.0) as client:
+            yield build_scene(client)
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    """Debian's Chromium driven by Playwright (which never downloads a browser here)."""
+    chromium_or_skip()
+    with sync_playwright() as playwright:
+        launched = playwright.chromium.launch(
+            executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, headless=True
+        )
+        try:
+            yield launched
+        finally:
+            launched.close()
+
+
+@dataclass(frozen=True)
+class Browsed:
+    page: Page
+    errors: list[str]  # script errors and console errors (CSP violations among them)
+
+
+@pytest.fixture
+def browsed(browser: Browser) -> Iterator[Browsed]:
+    """A fresh page in its own context, recording errors."""
+    context = browser.new_context(viewport={"width": 1400, "height": 900})
+    page = context.new_page()
+    page.set_default_timeout(TIMEOUT_MS)
+    errors: list[str] = []
+
+    def console(message: ConsoleMessage) -> None:
+        if message.type == "error":
+            errors.append(f"{message.text} ({message.location.get('url')})")
+
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    page.on("console", console)
+    try:
+        yield Browsed(page, errors)
+    finally:
+        context.close()
+
+
+def shot(page: Page, name: str) -> None:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / f"{name}.png"), full_page=True)
+
+
+def shown_at(page: Page, seq: int) -> None:
+    """Wait until the page has drawn the graph, events and selection of `seq`."""
+    page.wait_for_selector(f'body[data-seq="{seq}"]', state="attached")
+
+
+def head_now(demo: DemoScene) -> int:
+    """The scene's head as the API reports it (a verdict in another test moves it on)."""
+    head: int = httpx.get(f"{demo.url}/v1/scenes/{demo.scene_id}").json()["head_seq"]
+    return head
+
+
+def track_item(page: Page, label: str) -> Locator:
+    return page.locator(f'#tracks li[data-label="{label}"]')
+
+
+def test_slider_explanation_and_verdict_in_the_browser(demo: DemoScene, browsed: Browsed) -> None:
+    page = browsed.page
+    page.goto(f"{demo.url}/viewer?scene={demo.scene_id}")
+    shown_at(page, demo.head)
+    assert page.locator("#seq").get_attribute("max") == str(demo.head)
+    assert track_item(page, "counter").get_attribute("data-state") == "confirmed"
+    assert track_item(page, "mug").count() == 0  # removed: not in the published graph
+    assert track_item(page, "table").count() == 0  # waits for a verdict
+    assert page.locator("#map").get_attribute("data-nodes") == "1"
+    assert page.locator("#events li").count() > 0
+    assert page.locator(f'#events li[data-seq="{demo.head}"]').count() == 1
+    shot(page, "1-head")
+
+    # Before the removal the mug is back, confirmed on the table.
+    before = demo.last_published
+    page.locator("#seq").fill(str(before))
+    shown_at(page, before)
+    assert page.locator("#seq-label").text_content() == str(before)
+    mug = track_item(page, "mug")
+    assert mug.get_attribute("data-state") == "confirmed"
+    assert mug.get_attribute("data-track") == demo.mug_id
+    assert demo.table_id in (mug.text_content() or "")  # "on table (trk-...)"
+    assert page.locator(f'#events li[data-seq="{before}"]').count() == 1
+    shot(page, "2-before-removal")
+
+    # Its belief then, and the explanation of its removal from the log.
+    mug.click()
+    explanation = page.locator("#explanation")
+    explanation.wait_for()
+    summary = explanation.text_content() or ""
+    assert f"was removed at seq {demo.removed_at}" in summary, summary
+    assert "visibility-admissible misses" in summary
+    assert page.locator("#track-detail li").count() >= 1  # the visible misses behind it
+    detail = page.locator("#track-detail dl").text_content() or ""
+    assert "confirmed" in detail and "mug" in detail
+    assert page.locator("#tracks li.selected").get_attribute("data-track") == demo.mug_id
+    shot(page, "3-explanation")
+
+    # Confirm the pending table: the head moves on and the table is published.
+    pending = page.locator(f'#verifications li[data-track="{demo.table_id}"]')
+    assert pending.get_attribute("data-label") == "table"
+    pending.locator("button.confirm").click()
+    track_item(page, "table").wait_for()
+    head = head_now(demo)
+    assert head > demo.head
+    shown_at(page, head)
+    table = track_item(page, "table")
+    assert table.get_attribute("data-state") == "confirmed"
+    assert table.get_attribute("data-track") == demo.table_id
+    assert page.locator("#verifications li[data-track]").count() == 0
+    assert page.locator("#seq").get_attribute("max") == str(head)
+    assert page.locator('#events li[data-type="verify"]').count() == 1
+    shot(page, "4-table-confirmed")
+    graph = httpx.get(f"{demo.url}/v1/scenes/{demo.scene_id}/graph").json()
+    assert demo.table_id in {node["id"] for node in graph["nodes"]}
+    assert browsed.errors == []
+
+
+def test_a_typed_token_is_sent_as_a_bearer_header(demo: DemoScene, browsed: Browsed) -> None:
+    page = browsed.page
+    page.goto(f"{demo.url}/viewer?scene={demo.scene_id}")
+    shown_at(page, head_now(demo))
+    requests: list[str | None] = []
+    page.on("request", lambda request: requests.append(request.headers.get("authorization")))
+    page.fill("#token", "pbdag_nosuch_token")
+    page.click("#token-form button")
+    # The page forbids eval (CSP), so wait on selectors rather than on evaluated functions.
+    expect(page.locator("#status")).to_contain_text("needs a token", timeout=TIMEOUT_MS)
+    assert "Bearer pbdag_nosuch_token" in requests
+    shot(page, "5-bad-token")
+    page.fill("#token", "")
+    page.click("#token-form button")
+    expect(page.locator("#status")).to_have_class("ok", timeout=TIMEOUT_MS)
+    assert requests[-1] is None
+
+
+def test_docs_render_with_every_other_host_blocked(demo: DemoScene, browsed: Browsed) -> None:
+    page = browsed.page
+    blocked: list[str] = []
+
+    def only_loopback(route: Route) -> None:
+        if urlsplit(route.request.url).hostname in LOOPBACK:
+            route.continue_()
+        else:
+            blocked.append(route.request.url)
+            route.abort()
+
+    page.context.route("**/*", only_loopback)
+    page.goto(f"{demo.url}/docs")
+    page.wait_for_selector(".opblock", state="visible")
+    document = httpx.get(f"{demo.url}/openapi.json").json()
+    operations = sum(len(methods) for methods in document["paths"].values())
+    assert page.locator(".opblock").count() == operations
+    assert "PBD-AG" in (page.locator(".information-container .title").text_content() or "")
+    shot(page, "6-docs-offline")
+    assert blocked == []  # nothing even tried to leave the machine
+    assert browsed.errors == []
