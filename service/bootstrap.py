@@ -45,7 +45,7 @@ def build_container(
         migrate(engine)
     log = EventLog(engine, clock)
     queue = BatchQueue(engine, clock)
-    metrics = Metrics(queue)
+    metrics = Metrics(queue, clock)
     return Container(
         settings=settings,
         engine=engine,

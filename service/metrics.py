@@ -60,10 +60,13 @@ class QueueCollector(Collector):
 class Metrics:
     """The registry of one process and the instruments the worker and the store update."""
 
-    def __init__(self, queue: BatchQueue | None = None) -> None:
+    def __init__(
+        self, queue: BatchQueue | None = None, clock: Callable[[], float] = time.time
+    ) -> None:
         self.registry = CollectorRegistry(auto_describe=True)
-        if queue is not None:
-            self.registry.register(QueueCollector(queue))
+        self.queue_collector = None if queue is None else QueueCollector(queue, clock)
+        if self.queue_collector is not None:
+            self.registry.register(self.queue_collector)
         self.decide_seconds = Histogram(
             "pbdag_decide_seconds",
             "Worker: decoding and deciding one batch (seconds).",
