@@ -95,6 +95,17 @@ class Graph(BaseModel):
     )
 
 
+class NodeLinkGraph(BaseModel):
+    """The graph as networkx's node-link JSON (`format=json-graph`): `networkx.node_link_graph`
+    reads it back. Node attributes are those of the default format, `id` the track id."""
+
+    directed: bool
+    multigraph: bool
+    graph: dict[str, Any] = Field(description="`scene_id` and `seq`.")
+    nodes: list[dict[str, Any]]
+    edges: list[dict[str, Any]] = Field(description="`source` -on-> `target` (its support).")
+
+
 class EventOut(BaseModel):
     """One event of the log."""
 

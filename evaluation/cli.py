@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -23,6 +25,40 @@ SHIPPED = [
 ]
 DEFAULT_SCENARIOS = {"dynamic": SHIPPED, "fixtures": SHIPPED}
 ACTIVE_SHIPPED = ["active/flat.yaml", "active/suite.yaml", "active/floor.yaml"]
+# The `eval` extra of pyproject.toml: the module each of its distributions installs.
+EVAL_EXTRA = {
+    "open3d": "open3d-cpu",
+    "pycocotools": "pycocotools",
+    "yaml": "pyyaml",
+    "tqdm": "tqdm",
+    "motmetrics": "motmetrics",
+    "pandas": "pandas",
+    "matplotlib": "matplotlib",
+}
+
+
+def missing_eval_distributions() -> list[str]:
+    """The distributions of the `eval` extra that are not installed."""
+    return [name for module, name in EVAL_EXTRA.items() if importlib.util.find_spec(module) is None]
+
+
+def needs_eval_extra(
+    handler: Callable[[argparse.Namespace], int],
+) -> Callable[[argparse.Namespace], int]:
+    """The handler, run only when the `eval` extra is installed; else one line saying so."""
+
+    def checked(args: argparse.Namespace) -> int:
+        missing = missing_eval_distributions()
+        if missing:
+            print(
+                f"pbdag eval: needs the eval extra (missing {', '.join(missing)}): "
+                "install pbdag[eval] (in a clone: pip install -e '.[eval]')",
+                file=sys.stderr,
+            )
+            return 2
+        return handler(args)
+
+    return checked
 
 
 def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -70,7 +106,7 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
             "settings still apply on top; default: core/params.py)",
         )
         parser.add_argument("--quiet", action="store_true", help="no progress bar")
-        parser.set_defaults(handler=run)
+        parser.set_defaults(handler=needs_eval_extra(run))
     active = protocols.add_parser(
         "active",
         help="autonomous construction from an empty map: coarse and fine P/R/F1 (Table 3), "
@@ -99,7 +135,7 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     active.add_argument("--token", help="bearer token for --via-service (default: $PBDAG_TOKEN)")
     active.add_argument("--params", metavar="JSON", help="overrides of core/params.py")
     active.add_argument("--quiet", action="store_true", help="no progress lines")
-    active.set_defaults(handler=run_active)
+    active.set_defaults(handler=needs_eval_extra(run_active))
 
 
 def parsed_params(text: str | None) -> dict[str, Any]:

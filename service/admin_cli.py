@@ -1,9 +1,10 @@
-"""Operator commands: `pbdag rebuild`, `pbdag requeue`, `pbdag repair`."""
+"""Operator commands: `pbdag rebuild`, `pbdag requeue`, `pbdag repair`, `pbdag export`."""
 
 from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from core.errors import PbdagError
 
@@ -32,6 +33,22 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     repair.add_argument("scene", help="the scene to check and, if needed, repair")
     repair.set_defaults(handler=_repair)
+
+    export = commands.add_parser(
+        "export",
+        help="write a scene's published graph as GraphML or node-link JSON (the same graph as "
+        "GET /v1/scenes/{id}/graph?format=...)",
+    )
+    export.add_argument("scene", help="the scene")
+    export.add_argument(
+        "--format", choices=("graphml", "json-graph"), default="graphml", help="(default: graphml)"
+    )
+    export.add_argument("--as-of", type=int, help="the graph at this seq (default: the head)")
+    export.add_argument(
+        "--all", action="store_true", help="every track, not only the published ones"
+    )
+    export.add_argument("--out", type=Path, help="write to this file (default: standard output)")
+    export.set_defaults(handler=_export)
 
 
 def _rebuild(args: argparse.Namespace) -> int:
@@ -115,5 +132,37 @@ def _repair(args: argparse.Namespace) -> int:
         print(
             f"  commands after the bad event were not replayed (seqs {report.commands_dropped}); "
             "issue them again on the new scene if still wanted"
+        )
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from core.graph import publish
+    from service.bootstrap import build_container
+    from service.export import export_graph
+    from service.states import StateReader
+    from service.store.errors import SceneQuarantined
+
+    container = build_container()
+    try:
+        scene = container.log.scene(args.scene)
+        if scene.quarantined is not None:
+            raise SceneQuarantined(scene.id, scene.quarantined)
+        state = StateReader(container.log).state(scene.id, args.as_of)
+    except PbdagError as error:
+        print(f"pbdag export: {error.detail}", file=sys.stderr)
+        return 2
+    graph = publish(state, include_all=args.all)
+    graph.graph["scene_id"] = scene.id
+    document = export_graph(graph, args.format)
+    if args.out is None:
+        sys.stdout.buffer.write(document)
+        sys.stdout.flush()
+    else:
+        args.out.write_bytes(document)
+        print(
+            f"{scene.id}: {graph.number_of_nodes()} nodes, {graph.number_of_edges()} edges "
+            f"at seq {state.head_seq} -> {args.out}",
+            file=sys.stderr,
         )
     return 0

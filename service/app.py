@@ -6,11 +6,14 @@ from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
+from starlette.responses import PlainTextResponse
 
 from api_schema import Health
 from service.bootstrap import Container, build_container
 from service.errors import install_problem_handlers
+from service.metrics import CONTENT_TYPE_LATEST
 from service.middleware.body_limit import BodySizeLimit
+from service.middleware.request_log import RequestLog
 from service.middleware.unexpected import UnexpectedErrors
 from service.openapi import install_openapi
 from service.routes import (
@@ -66,7 +69,8 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
     install_security(app, container)
     install_openapi(app)  # hosts, CORS, tokens, rate limits: before the body limit
-    app.add_middleware(UnexpectedErrors)  # outermost of ours: a 500 keeps the connection
+    app.add_middleware(UnexpectedErrors)  # a 500 keeps the connection
+    app.add_middleware(RequestLog)  # outermost: every answer logged, with its scene and batch
     routers = (scenes, batches, graph, events, tracks, verifications, baselines, inspections, plan)
     for module in routers:
         app.include_router(module.router)
@@ -77,5 +81,16 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
         return Health(
             status="ok", database=container.engine.dialect.name, batches=container.queue.counts()
         )
+
+    @app.get(
+        "/metrics",
+        tags=["health"],
+        response_class=PlainTextResponse,
+        responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}}}},
+    )
+    def metrics() -> PlainTextResponse:
+        """Prometheus metrics (text format): batches per status, the oldest waiting batch's age,
+        this process's worker latencies, events appended and dead letters (`read` scope)."""
+        return PlainTextResponse(container.metrics.exposition(), media_type=CONTENT_TYPE_LATEST)
 
     return app

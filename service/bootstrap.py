@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import sqlalchemy as sa
 
+from service.metrics import Metrics
 from service.settings import Settings
 from service.store.blobs import BlobStore, FileBlobStore
 from service.store.engine import make_engine, migrate
@@ -26,6 +27,7 @@ class Container:
     queue: BatchQueue
     blobs: BlobStore
     uow: UnitOfWork  # the one write path of the log
+    metrics: Metrics  # this process's Prometheus registry
 
 
 def build_container(
@@ -43,11 +45,13 @@ def build_container(
         migrate(engine)
     log = EventLog(engine, clock)
     queue = BatchQueue(engine, clock)
+    metrics = Metrics(queue, clock)
     return Container(
         settings=settings,
         engine=engine,
         log=log,
         queue=queue,
         blobs=blobs or FileBlobStore(settings.data_dir / "blobs"),
-        uow=UnitOfWork(engine, log, queue, settings.snapshot_interval),
+        uow=UnitOfWork(engine, log, queue, settings.snapshot_interval, metrics.events_appended.inc),
+        metrics=metrics,
     )

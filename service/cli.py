@@ -5,15 +5,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import logging
 import signal
 import sys
+import textwrap
 import threading
 from importlib.metadata import entry_points
 from pathlib import Path
 
 from service.admin_cli import register as register_admin_commands
 from service.auth_cli import register as register_token_commands
+from service.logs import configure_logging
 from service.settings import Settings
 
 OPENAPI_PATH = Path(__file__).resolve().parents[1] / "api_schema" / "openapi.json"
@@ -25,25 +26,46 @@ def main(argv: list[str] | None = None) -> int:
     commands = parser.add_subparsers(dest="command", required=True)
 
     serve = commands.add_parser(
-        "serve", help="run the HTTP API (with an in-process worker by default)"
+        "serve",
+        help="run the HTTP API (with an in-process worker by default)",
+        description="Run the HTTP API (with an in-process worker by default). Every option "
+        "falls back to its environment variable, then to its default.",
+        epilog=settings_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    serve.add_argument("--host", default="127.0.0.1")
-    serve.add_argument("--port", type=int, default=8000)
+    serve.add_argument("--host", help=setting_help("host", "address to listen on"))
+    serve.add_argument("--port", type=int, help=setting_help("port", "port to listen on"))
     serve.add_argument(
-        "--no-worker", action="store_true", help="API only; run `pbdag worker` separately"
+        "--no-worker",
+        dest="run_worker",
+        action="store_const",
+        const=False,
+        help=setting_help("run_worker", "API only; run `pbdag worker` separately"),
     )
+    add_logging_options(serve)
 
     worker = commands.add_parser(
-        "worker", help="process queued batches (several may share one PostgreSQL)"
+        "worker",
+        help="process queued batches (several may share one PostgreSQL)",
+        epilog=settings_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     worker.add_argument("--drain", action="store_true", help="exit once the queue is empty")
+    worker.add_argument(
+        "--metrics-port",
+        type=int,
+        help=setting_help(
+            "metrics_port", "serve this worker's Prometheus metrics on 127.0.0.1:PORT"
+        ),
+    )
+    add_logging_options(worker)
 
     commands.add_parser("migrate", help="create or upgrade the database schema")
 
     openapi = commands.add_parser("openapi", help="write the OpenAPI document")
     openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
     register_token_commands(commands)  # `pbdag token create|list|revoke`
-    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair`
+    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|export`
 
     for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from evaluation
         try:
@@ -53,10 +75,6 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if hasattr(args, "handler"):
         return int(args.handler(args))
-    logging.basicConfig(
-        level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
-    )
-    logging.getLogger("alembic").setLevel(logging.WARNING)
     handlers = {
         "serve": _serve,
         "worker": _worker,
@@ -64,6 +82,64 @@ def main(argv: list[str] | None = None) -> int:
         "openapi": _openapi,
     }
     return handlers[args.command](args)
+
+
+def env_name(field: str) -> str:
+    """The environment variable of a setting."""
+    return f"PBDAG_{field.upper()}"
+
+
+def shown_default(field: str) -> str:
+    """A setting's default as a person would type it."""
+    info = Settings.model_fields[field]
+    value = info.get_default(call_default_factory=True)
+    if value is None:
+        return "unset"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, list):
+        return ",".join(str(item) for item in value) or "empty"
+    return str(value)
+
+
+def setting_help(field: str, text: str) -> str:
+    """Help of an option that overrides a setting: its default and its variable."""
+    return f"{text} (default: {shown_default(field)}; env {env_name(field)})"
+
+
+def settings_epilog() -> str:
+    """Every setting: its variable, default and meaning (from service/settings.py)."""
+    lines = ["environment (also a file /run/secrets/<variable in lower case>):"]
+    for field, info in Settings.model_fields.items():
+        lines.append(f"  {env_name(field)}={shown_default(field)}")
+        for line in textwrap.wrap(info.description or "", 72):
+            lines.append(f"      {line}")
+    return "\n".join(lines)
+
+
+def add_logging_options(command: argparse.ArgumentParser) -> None:
+    """--log-format and --log-level."""
+    command.add_argument(
+        "--log-format",
+        choices=("text", "json"),
+        help=setting_help("log_format", "text lines, or one JSON object per line"),
+    )
+    command.add_argument(
+        "--log-level",
+        choices=("DEBUG", "INFO", "WARNING", "ERROR"),
+        help=setting_help("log_level", "least severe level logged"),
+    )
+
+
+def settings_with(args: argparse.Namespace, **fields: str) -> Settings:
+    """The settings, with the options given on the command line (argument -> setting)."""
+    settings = Settings()
+    for argument, field in fields.items():
+        value = getattr(args, argument, None)
+        if value is not None:
+            setattr(settings, field, value)
+    configure_logging(settings.log_format, settings.log_level)
+    return settings
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -74,29 +150,48 @@ def _serve(args: argparse.Namespace) -> int:
     from service.bootstrap import build_container
     from service.security import hosts_when_serving
 
-    settings = Settings()
-    settings.allowed_hosts = hosts_when_serving(settings.allowed_hosts, args.host)
+    settings = settings_with(
+        args,
+        host="host",
+        port="port",
+        run_worker="run_worker",
+        log_format="log_format",
+        log_level="log_level",
+    )
+    settings.allowed_hosts = hosts_when_serving(settings.allowed_hosts, settings.host)
     container = build_container(settings)
-    refusal = serve_refusal(args.host, container.engine)  # before binding anything
+    refusal = serve_refusal(settings.host, container.engine)  # before binding anything
     if refusal is not None:
         print(refusal, file=sys.stderr)
         return 2
     print(
         f"pbdag: database {_redacted(settings.resolved_database_url())}, data in {settings.data_dir.resolve()}"
     )
-    print(f"pbdag: API on http://{args.host}:{args.port} (docs at /docs)", flush=True)
+    print(
+        f"pbdag: API on http://{settings.host}:{settings.port} (docs at /docs, metrics at /metrics)",
+        flush=True,
+    )
     print(f"pbdag: allowed Host names {', '.join(settings.allowed_hosts)} (PBDAG_ALLOWED_HOSTS)")
     print(access_summary(container.engine, settings.allow_anonymous_local), flush=True)
-    app = create_app(container, run_worker=not args.no_worker)
-    uvicorn.run(app, host=args.host, port=args.port, log_level="warning")
+    app = create_app(container, run_worker=settings.run_worker)
+    # log_config=None: uvicorn's records go through the handler configured above (text or JSON).
+    uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning", log_config=None)
     return 0
 
 
 def _worker(args: argparse.Namespace) -> int:
+    from prometheus_client import start_http_server
+
     from service.bootstrap import build_container
     from service.worker import Worker
 
-    container = build_container()
+    settings = settings_with(
+        args, metrics_port="metrics_port", log_format="log_format", log_level="log_level"
+    )
+    container = build_container(settings)
+    if settings.metrics_port:
+        start_http_server(settings.metrics_port, "127.0.0.1", container.metrics.registry)
+        print(f"pbdag worker: metrics on http://127.0.0.1:{settings.metrics_port}/metrics")
     worker = Worker(container)
     if args.drain:
         processed = worker.drain()
@@ -112,12 +207,14 @@ def _worker(args: argparse.Namespace) -> int:
 def _migrate(_args: argparse.Namespace) -> int:
     from service.bootstrap import build_container
 
+    configure_logging()
     container = build_container()
     print(f"pbdag: schema of {_redacted(container.settings.resolved_database_url())} is up to date")
     return 0
 
 
 def _openapi(args: argparse.Namespace) -> int:
+    configure_logging()
     from service.app import create_app
     from service.bootstrap import build_container
     from service.store.blobs import MemoryBlobStore

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 from pydantic import Field
 from pydantic_settings import SettingsConfigDict
@@ -16,6 +17,28 @@ class Settings(SecuritySettings):
 
     model_config = SettingsConfigDict(env_prefix="PBDAG_", extra="ignore")
 
+    # `pbdag serve` and `pbdag worker` (their options override these).
+    host: str = Field(
+        "127.0.0.1",
+        description="Address `pbdag serve` listens on; a non-loopback one needs an active token.",
+    )
+    port: int = Field(8000, ge=1, le=65535, description="Port `pbdag serve` listens on.")
+    run_worker: bool = Field(
+        True, description="`pbdag serve` runs a worker in its process (false: API only)."
+    )
+    log_format: Literal["text", "json"] = Field(
+        "text",
+        description="Log lines as text, or one JSON object per line (with scene and batch ids).",
+    )
+    log_level: Literal["DEBUG", "INFO", "WARNING", "ERROR"] = Field(
+        "INFO", description="Least severe log level written."
+    )
+    metrics_port: int = Field(
+        0,
+        ge=0,
+        le=65535,
+        description="`pbdag worker` serves its Prometheus metrics on this loopback port (0: none).",
+    )
     data_dir: Path = Field(
         Path("./data"), description="Blobs and the default SQLite database live here."
     )

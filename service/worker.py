@@ -29,6 +29,7 @@ from core.errors import PbdagError
 from core.state import SceneState
 from service.bootstrap import Container
 from service.codec import decode_batch
+from service.logs import log_context
 from service.store.errors import ConcurrencyConflict, LeaseLost
 from service.store.queue import Claim
 
@@ -102,26 +103,41 @@ class Worker:
 
     def process(self, claim: Claim) -> None:
         """One batch end to end; failures are recorded on the batch, never raised."""
+        with log_context(scene_id=claim.scene_id, batch_id=claim.batch_id):
+            self._process(claim)
+
+    def _process(self, claim: Claim) -> None:
         container = self.container
+        metrics = container.metrics
         try:
             with self._renewing(claim):
-                body = container.blobs.get(claim.blob_key)
-                batch = decode_batch(
-                    BatchIn.model_validate_json(body), container.settings.input_limits()
-                )
-                state = self._state(claim.scene_id)
-                events = decide(state, batch)
-                with container.uow.begin() as work:
+                with metrics.timed(metrics.decide_seconds):
+                    body = container.blobs.get(claim.blob_key)
+                    batch = decode_batch(
+                        BatchIn.model_validate_json(body), container.settings.input_limits()
+                    )
+                    state = self._state(claim.scene_id)
+                    events = decide(state, batch)
+                with metrics.timed(metrics.append_seconds), container.uow.begin() as work:
                     appended = work.append(claim.scene_id, state, events, batch_id=claim.batch_id)
                     work.complete(claim, appended.seqs)
         except LeaseLost:
             self._states.pop(claim.scene_id, None)
+            metrics.batches_processed.labels("lease_lost").inc()
             logger.warning("worker %s lost the lease of batch %s", self.name, claim.batch_id)
             return
         except Exception as error:
             self._states.pop(claim.scene_id, None)
             self._failed(claim, error)
             return
+        metrics.batches_processed.labels("done").inc()
+        logger.info(
+            "batch %s of scene %s done: %d events%s",
+            claim.batch_id,
+            claim.scene_id,
+            len(events),
+            "" if appended.seqs is None else f", seq {appended.seqs[0]}..{appended.seqs[1]}",
+        )
         self._remember(claim.scene_id, appended.state)
 
     def _failed(self, claim: Claim, error: BaseException) -> None:
@@ -137,6 +153,7 @@ class Worker:
         try:
             if transient and claim.attempts < self.container.settings.max_attempts:
                 self.container.queue.retry_later(claim, message, self.retry_delay(claim.attempts))
+                self.container.metrics.batches_processed.labels("retry").inc()
             else:
                 self.skip(claim, message)
         except LeaseLost:
@@ -157,6 +174,8 @@ class Worker:
             try:
                 with self.container.uow.begin() as work:
                     work.skip(claim, state, reason)
+                self.container.metrics.batches_processed.labels("dead").inc()
+                self.container.metrics.dead_letters.inc()
                 logger.warning(
                     "batch %s of scene %s is dead: %s", claim.batch_id, claim.scene_id, reason
                 )
@@ -171,12 +190,13 @@ class Worker:
         for claim in self.container.queue.expired():
             reason = f"lease expired on attempt {claim.attempts} (the worker stopped)"
             try:
-                if claim.attempts < settings.max_attempts:
-                    self.container.queue.retry_later(
-                        claim, reason, self.retry_delay(claim.attempts)
-                    )
-                else:
-                    self.skip(claim, reason)
+                with log_context(scene_id=claim.scene_id, batch_id=claim.batch_id):
+                    if claim.attempts < settings.max_attempts:
+                        self.container.queue.retry_later(
+                            claim, reason, self.retry_delay(claim.attempts)
+                        )
+                    else:
+                        self.skip(claim, reason)
             except LeaseLost:
                 continue  # another worker settled it first
 

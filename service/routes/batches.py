@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import logging
 from typing import Annotated
 
 from fastapi import APIRouter, Path, Response
@@ -15,6 +16,7 @@ from service.deps import ContainerDep, SceneDep, admission
 from service.wire import batch_out
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}/batches", tags=["batches"])
+logger = logging.getLogger("pbdag.api")
 BatchId = Annotated[str, Path(min_length=1, max_length=200, pattern=r"^[A-Za-z0-9._:-]+$")]
 
 
@@ -42,6 +44,13 @@ def post_batch(
     )
     if not created:
         response.status_code = 200
+    logger.info(
+        "batch %s %s (%d frames)",
+        batch.batch_id,
+        "queued" if created else "already accepted",
+        len(batch.frames),
+        extra={"batch_id": batch.batch_id},
+    )
     return batch_out(record)
 
 

@@ -209,6 +209,14 @@ class BatchQueue:
         with read_transaction(self.engine) as connection:
             return {status: int(n) for status, n in connection.execute(query).all()}
 
+    def oldest_waiting_received_at(self) -> float | None:
+        """When the oldest batch still waiting for a worker (queued, or failed and waiting for
+        its retry) was received; None when none waits."""
+        query = sa.select(sa.func.min(batches.c.received_at)).where(batches.c.status.in_(CLAIMABLE))
+        with read_transaction(self.engine) as connection:
+            oldest = connection.execute(query).scalar()
+        return None if oldest is None else float(oldest)
+
     # -- the worker's side --------------------------------------------------------------------
 
     def claim(self, owner: str, lease_seconds: float) -> Claim | None:

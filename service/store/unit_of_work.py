@@ -7,7 +7,7 @@ fence that marks it done. The worker, every command, scene creation and the test
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -35,18 +35,27 @@ class UnitOfWork:
     """Opens write transactions on the store (`with uow.begin() as work: ...`)."""
 
     def __init__(
-        self, engine: sa.Engine, log: EventLog, queue: BatchQueue, snapshot_interval: int
+        self,
+        engine: sa.Engine,
+        log: EventLog,
+        queue: BatchQueue,
+        snapshot_interval: int,
+        on_committed: Callable[[int], None] | None = None,
     ) -> None:
         self.engine = engine
         self.log = log
         self.queue = queue
         self.snapshot_interval = snapshot_interval
+        self.on_committed = on_committed  # told how many events each commit appended (metrics)
 
     @contextmanager
     def begin(self) -> Iterator[Writes]:
         """One write transaction: committed when the block ends, rolled back when it raises."""
         with write_transaction(self.engine) as connection:
-            yield Writes(self, connection)
+            writes = Writes(self, connection)
+            yield writes
+        if self.on_committed is not None and writes.events_appended:
+            self.on_committed(writes.events_appended)
 
 
 class Writes:
@@ -55,6 +64,7 @@ class Writes:
     def __init__(self, unit: UnitOfWork, connection: sa.Connection) -> None:
         self.unit = unit
         self.connection = connection
+        self.events_appended = 0
 
     def create_scene(
         self,
@@ -86,6 +96,7 @@ class Writes:
         seqs = self.unit.log.append(self.connection, scene_id, state.head_seq, events, batch_id)
         after = fold(state, events)
         if seqs is not None:
+            self.events_appended += seqs[1] - seqs[0] + 1
             self._project(scene_id, state, events, after, seqs[0])
         return Appended(after, seqs)
 

@@ -14,8 +14,7 @@ from core.evolve import fold
 from core.inspection import decide_inspection
 from core.state import SceneState, Track, Vec3
 from core.verification import decide_verdict
-from sim.world import object_on
-from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame
+from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 
 AMBIGUOUS = {"table": {"table": 0.50, "desk": 0.48}, "counter": {"counter": 0.6, "table": 0.3}}
 

@@ -15,8 +15,7 @@ from core.observation import Batch, Detection
 from core.rules import UpdateRules
 from core.state import SceneState
 from core.visibility import observable, samples_passed
-from sim.world import object_on
-from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame
+from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 from tests.core.scenes import (
     INTRINSICS,
     detection,

@@ -132,10 +132,10 @@ def restart_postgres() -> str | None:
 
 
 def bodies(count: int) -> list[dict[str, Any]]:
-    """Rendered one-frame batches (the mug on the table), reused under fresh batch ids."""
-    from tests.e2e.simworld import WORLD, batch
+    """One-frame batches (the mug in front of a wall), reused under fresh batch ids."""
+    from tests.wire_scenes import batch
 
-    return [batch(f"template-{i}", WORLD, i) for i in range(count)]
+    return [batch(f"template-{i}", i) for i in range(count)]
 
 
 def poisoned(body: dict[str, Any]) -> dict[str, Any]:

@@ -12,9 +12,15 @@ from sim.camera import look_at
 from sim.detector import detect, detect_fixtures
 from sim.render import render
 from sim.wire import make_batch, make_frame
-from sim.world import World, object_on
-from tests.core.rendered import CAMERA, COUNTER, COUNTER_VIEWS, TABLE, TABLE_VIEWS
+from sim.world import Box, World, object_on
+from tests.core import rendered
+from tests.core.rendered import CAMERA, COUNTER_VIEWS, TABLE_VIEWS
 
+# The fixtures of the core tests' room, as the simulator's boxes.
+TABLE, COUNTER = (
+    Box(box.id, box.label, box.center, box.size, kind="fixture")
+    for box in (rendered.TABLE, rendered.COUNTER)
+)
 MUG = object_on(TABLE, "mug", "mug", (0.1, 0.1, 0.1), at=(0.3, 0.0))
 ROOM = World(room_size=(6.0, 5.0, 2.6), fixtures=(TABLE, COUNTER), objects=(MUG,))
 FINE = (

@@ -23,7 +23,7 @@ from service.worker import Worker
 from tests.clients import local_client
 from tests.conftest import store_backends
 from tests.e2e.fault_run import free_port, wait_healthy
-from tests.e2e.simworld import WORLD, batch
+from tests.wire_scenes import batch
 
 BATCHES = 20
 PBDAG = [sys.executable, "-m", "service.cli"]
@@ -41,8 +41,7 @@ def start(args: list[str], env: dict[str, str], log: Path) -> subprocess.Popen[b
 
 def stream() -> list[dict[str, Any]]:
     """20 one-frame batches: the mug is seen, then taken away."""
-    empty = WORLD.without("mug")
-    return [batch(f"b{i:02d}", WORLD if i < 8 else empty, i) for i in range(BATCHES)]
+    return [batch(f"b{i:02d}", i, mug=i < 8) for i in range(BATCHES)]
 
 
 def outcome(client: httpx.Client | TestClient, scene_id: str) -> Outcome:

@@ -14,13 +14,19 @@ from service.bootstrap import Container
 from service.store.projection import rebuild_scene
 from service.worker import Worker
 from tests.clients import local_client
-from tests.core.rendered import COUNTER, COUNTER_VIEWS, TABLE, TABLE_VIEWS
-from tests.e2e.fixture_world import (
+from tests.core.rendered import COUNTER_VIEWS, TABLE_VIEWS
+from tests.eval_extra import require_eval_extra
+
+require_eval_extra()  # the simulator renders this test's world
+
+from tests.e2e.fixture_world import (  # noqa: E402
     AWAY_VIEW,
     CLOSE_VIEW,
+    COUNTER,
     DISCOVERY,
     FINE,
     ROOM,
+    TABLE,
     wire_batches,
     wire_frame,
 )

@@ -13,7 +13,11 @@ from service.app import create_app
 from service.bootstrap import Container
 from service.worker import Worker
 from tests.clients import local_client
-from tests.e2e.simworld import MUG_CENTER, OCCLUDER, WORLD, batch
+from tests.eval_extra import require_eval_extra
+
+require_eval_extra()  # the simulator renders this test's world
+
+from tests.e2e.simworld import MUG_CENTER, OCCLUDER, WORLD, batch  # noqa: E402
 
 Api = tuple[TestClient, Worker]  # a client on the app, and the worker the test drives
 

@@ -18,7 +18,11 @@ from service.bootstrap import Container
 from service.store.projection import rebuild_scene
 from service.worker import Worker
 from tests.clients import local_client
-from tests.e2e.fixture_world import AWAY_VIEW, DISCOVERY, ROOM, wire_batches, wire_frame
+from tests.eval_extra import require_eval_extra
+
+require_eval_extra()  # the simulator renders this test's world
+
+from tests.e2e.fixture_world import AWAY_VIEW, DISCOVERY, ROOM, wire_batches, wire_frame  # noqa: E402
 
 Api = tuple[TestClient, Worker, Container]
 ROBOT = {"x": 1.02, "y": 0.92, "yaw": 0.0}  # in front of the table, clear of everything

@@ -16,7 +16,7 @@ from service.bootstrap import Container
 from service.cli import OPENAPI_PATH
 from service.worker import Worker
 from tests.clients import local_client
-from tests.e2e.simworld import WORLD, batch
+from tests.wire_scenes import batch
 
 
 @pytest.fixture
@@ -32,7 +32,7 @@ def scene_id(client: TestClient) -> str:
 
 @pytest.fixture(scope="module")
 def good_batch() -> dict[str, Any]:
-    return batch("b-0", WORLD, 0)
+    return batch("b-0", 0)
 
 
 def queue_size(client: TestClient) -> int:
@@ -105,7 +105,7 @@ def test_unknown_scene_is_404_and_oversized_body_413(
 ) -> None:
     response = client.post("/v1/scenes/scn-missing/batches", json=good_batch)
     assert response.status_code == 404 and response.json()["field"] == "scene_id"
-    container.settings.max_body_bytes = 1000
+    container.settings.max_body_bytes = len(json.dumps(good_batch)) - 1
     with local_client(create_app(container)) as small:
         scene = small.post("/v1/scenes", json={"name": "x"}).json()["id"]
         response = small.post(f"/v1/scenes/{scene}/batches", content=json.dumps(good_batch))
@@ -144,8 +144,7 @@ def test_events_page_by_cursor_and_tracks_answer_queries(
 ) -> None:
     for i in range(3):
         assert (
-            client.post(f"/v1/scenes/{scene_id}/batches", json=batch(f"b{i}", WORLD, i)).status_code
-            == 202
+            client.post(f"/v1/scenes/{scene_id}/batches", json=batch(f"b{i}", i)).status_code == 202
         )
     Worker(container).drain()
     seen: list[int] = []

@@ -32,6 +32,7 @@ from service.security import AllowedHosts, hosts_when_serving
 from service.settings import Settings
 from service.store.tables import api_tokens
 from tests.clients import LOCAL_BASE_URL, local_client
+from tests.wire_scenes import batch
 
 LAN_CLIENT = ("192.168.1.50", 40000)
 TOKEN_PATTERN = re.compile(r"pbdag_[0-9a-f]{12}_[A-Za-z0-9_-]{43}")
@@ -97,15 +98,11 @@ def test_a_read_token_reads_but_its_write_is_403_naming_the_scope(
 
 
 def test_a_write_token_posts_scenes_and_batches(container: Container, lan: TestClient) -> None:
-    from tests.e2e.simworld import WORLD, batch
-
     token = create_token(container.engine, "robot-1", ["write"]).token
     created = lan.post("/v1/scenes", json={"name": "kitchen"}, headers=bearer(token))
     assert created.status_code == 201, created.text
     scene_id = created.json()["id"]
-    posted = lan.post(
-        f"/v1/scenes/{scene_id}/batches", json=batch("b0", WORLD, 0), headers=bearer(token)
-    )
+    posted = lan.post(f"/v1/scenes/{scene_id}/batches", json=batch("b0", 0), headers=bearer(token))
     assert posted.status_code == 202, posted.text
     assert lan.get(f"/v1/scenes/{scene_id}", headers=bearer(token)).status_code == 200
 
