@@ -92,7 +92,8 @@ def test_docs_load_swagger_ui_from_the_package(local: TestClient) -> None:
 def test_pages_stay_out_of_the_api_document(local: TestClient) -> None:
     paths = local.get("/openapi.json").json()["paths"]
     assert paths
-    assert not [path for path in paths if not path.startswith(("/v1/", "/healthz"))]
+    assert not [path for path in paths if not path.startswith(("/v1/", "/healthz", "/metrics"))]
+    assert not [path for path in paths if path.startswith(("/viewer", "/static", "/docs"))]
 
 
 def test_vendored_swagger_ui_is_the_pinned_release_with_its_licence() -> None:
