@@ -32,6 +32,9 @@ FORBIDDEN = {
     # other way round, and neither depends on the benchmarks.
     "sim": {"evaluation", "bench", "tests"},
     "evaluation": {"bench", "tests"},
+    # Recorded data in, batches out over HTTP: the wire models only, never the service's insides
+    # or the method itself (a user's robot has neither).
+    "ingest": {"core", "service", "sim", "evaluation", "bench", "tests", "sqlalchemy", "fastapi"},
 }
 # Packages whose module graph must stay acyclic (checked module by module, not just by package).
 ACYCLIC = ("sim", "evaluation")
