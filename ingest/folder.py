@@ -102,11 +102,10 @@ class FolderSource:
                 f"a folder has no topics; the detector asks for {', '.join(extra_topics)}"
             )
         intrinsics: CameraIntrinsics | None = None
-        taken = 0
         for position, (number, depth_file) in enumerate(
             zip(self.numbers, self.depth_files, strict=True)
         ):
-            take, stop = frame_window(position, self.stride, self.limit, taken)
+            take, stop = frame_window(position, self.stride, self.limit)
             if stop:
                 return
             if not take:
@@ -132,7 +131,6 @@ class FolderSource:
                 )
             colour = depth_file.with_name(f"{stem}.color.jpg")
             self.counts.read += 1
-            taken += 1
             yield SourceFrame(
                 index=number,
                 frame_id=stem,

@@ -97,11 +97,12 @@ class FrameSource(Protocol):
         ...
 
 
-def frame_window(index: int, stride: int, limit: int | None, taken: int) -> tuple[bool, bool]:
-    """(take this index, stop now) for a stride and a limit over a stream."""
-    if limit is not None and taken >= limit:
+def frame_window(position: int, stride: int, limit: int | None) -> tuple[bool, bool]:
+    """(take this position, stop now): every `stride`-th frame of the stream, the first `limit`
+    of those (skipped ones count: `--limit 20` looks at 20 frames)."""
+    if limit is not None and position >= limit * stride:
         return False, True
-    return index % stride == 0, False
+    return position % stride == 0, False
 
 
 def check_stride_and_limit(stride: int, limit: int | None) -> None:

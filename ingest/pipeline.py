@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -34,7 +35,9 @@ class IngestSummary:
             f"(with {self.detections_sent} detections), skipped: {skipped_total}"
         ]
         lines += [f"  skipped {count}: {reason}" for reason, count in sorted(self.skipped.items())]
-        if self.sink is not None:
+        if self.sink is None:
+            lines.append("nothing sent: no frame could be used")
+        else:
             sink = self.sink
             verb = "created" if sink.scene_created else "existing"
             lines.append(
@@ -96,13 +99,22 @@ def ingest(
             bar.update(selected() - bar.n)
 
     try:
-        summary.sink = post_batches(
-            url,
-            scene,
-            batches(wire_frames(), prefix or batch_prefix(source.name), frames_per_batch),
-            token=token,
-            wait=wait,
-        )
+        # The first frame before the first request: a missing topic, frame or file is reported
+        # before anything reaches the service (no empty scene is left behind).
+        frames = wire_frames()
+        first = next(frames, None)
+        if first is not None:
+            summary.sink = post_batches(
+                url,
+                scene,
+                batches(
+                    itertools.chain([first], frames),
+                    prefix or batch_prefix(source.name),
+                    frames_per_batch,
+                ),
+                token=token,
+                wait=wait,
+            )
     finally:
         bar.update(selected() - bar.n)
         bar.close()

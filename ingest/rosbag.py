@@ -190,9 +190,8 @@ class RosbagSource:
             infos = self._camera_infos(reader)
             poser = self._poser(reader)
             extras = {topic: self._index(reader, topic) for topic in extra_topics}
-            taken = 0
             for position, (connection, _, raw) in enumerate(reader.messages(depth_connections)):
-                take, stop = frame_window(position, self.stride, self.limit, taken)
+                take, stop = frame_window(position, self.stride, self.limit)
                 if stop:
                     return
                 if not take:
@@ -234,7 +233,6 @@ class RosbagSource:
                         f"{intrinsics.height}, the depth images are {depth.shape[1]}x{depth.shape[0]}"
                     )
                 self.counts.read += 1
-                taken += 1
                 yield SourceFrame(
                     index=position,
                     frame_id=f"{self.name}-{stamp}",

@@ -200,13 +200,14 @@ def write_bag(
     frames: int,
     *,
     without_tf: frozenset[int] = frozenset(),
+    without_labels: frozenset[int] = frozenset(),
     float_depth: bool = False,
 ) -> Path:
     """A ROS 2 bag of the first `frames` frames: /camera/depth (16UC1 mm, or 32FC1 m),
     /camera/camera_info, /camera/instances (16UC1 ids), /tf, /tf_static and /odom.
 
     /tf and /odom are stamped 4 ms after each depth image (inside the pose tolerance); frames
-    in `without_tf` have neither."""
+    in `without_tf` have neither, frames in `without_labels` no label image."""
     typestore = get_typestore(Stores.ROS2_HUMBLE)
     instance_boxes = boxes(kitchen)
     odom_to_map = invert(MAP_TO_ODOM)
@@ -256,9 +257,7 @@ def write_bag(
                 encoding = "32FC1"
             write(info_topic, ns, _camera_info(typestore, ns))
             write(depth_topic, ns, _image(typestore, ns, pixels, encoding))
-            write(
-                label_topic,
-                ns + 1,
-                _image(typestore, ns, instance_image(depth, pose, instance_boxes), "16UC1"),
-            )
+            if index not in without_labels:  # recorded a moment after the depth, same stamp
+                ids = instance_image(depth, pose, instance_boxes)
+                write(label_topic, ns + 1, _image(typestore, ns, ids, "16UC1"))
     return out
