@@ -43,6 +43,11 @@ class IngestSummary:
             lines.append(
                 f"scene {sink.scene_id} ({verb}): batches posted {sink.posted}"
                 + (f" ({sink.already_accepted} accepted before)" if sink.already_accepted else "")
+                + (
+                    f", {sink.busy_retries} requests repeated after a busy reply (429/503)"
+                    if sink.busy_retries
+                    else ""
+                )
             )
             statuses: dict[str, int] = {}
             for status in sink.statuses.values():

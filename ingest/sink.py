@@ -36,6 +36,7 @@ class SinkResult:
     statuses: dict[str, str] = field(default_factory=dict)  # batch id -> last known status
     events_appended: int | None = None  # known when waited for
     errors: dict[str, str] = field(default_factory=dict)  # dead batch id -> its error
+    busy_retries: int = 0  # requests repeated after a 429 (queue full, rate limit) or a 503
 
 
 def _problem(response: httpx.Response, action: str) -> SinkError:
@@ -52,9 +53,15 @@ def _problem(response: httpx.Response, action: str) -> SinkError:
 
 
 def _request(
-    client: httpx.Client, method: str, path: str, action: str, **kwargs: Any
+    client: httpx.Client,
+    method: str,
+    path: str,
+    action: str,
+    result: SinkResult | None = None,
+    **kwargs: Any,
 ) -> httpx.Response:
-    """One request; 429 and 503 are retried after the Retry-After the service sends."""
+    """One request; 429 and 503 are retried after the Retry-After the service sends (counted in
+    `result`)."""
     waited = 0.0
     while True:
         try:
@@ -70,6 +77,8 @@ def _request(
         delay = min(max(delay, 0.1), 30.0)
         time.sleep(delay)
         waited += delay
+        if result is not None:
+            result.busy_retries += 1
 
 
 def find_or_create_scene(client: httpx.Client, scene: str) -> tuple[str, bool]:
@@ -123,6 +132,7 @@ def post_batches(
                 "POST",
                 f"/v1/scenes/{scene_id}/batches",
                 action,
+                result,
                 json=batch.model_dump(mode="json", exclude_none=True),
             )
             if response.status_code not in (200, 202):
@@ -151,7 +161,7 @@ def _wait(client: httpx.Client, result: SinkResult, timeout: float) -> None:
         batch_id = pending[0]
         action = f"status of batch {batch_id}"
         response = _request(
-            client, "GET", f"/v1/scenes/{result.scene_id}/batches/{batch_id}", action
+            client, "GET", f"/v1/scenes/{result.scene_id}/batches/{batch_id}", action, result
         )
         if response.status_code != 200:
             raise _problem(response, action)

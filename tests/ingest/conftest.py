@@ -3,6 +3,7 @@ database and data directory), and the recordings written from the real kitchen f
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -19,33 +20,59 @@ FRAMES = 20
 REPO = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(scope="session")
-def service_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
-    """The URL of a `pbdag serve` (with its worker) that the ingest tests share."""
-    data = tmp_path_factory.mktemp("service")
+@dataclass
+class Service:
+    """A running `pbdag serve`: its URL, and a way to add a `pbdag worker` beside it."""
+
+    url: str
+    env: dict[str, str]
+    log: Path
+    processes: list[subprocess.Popen[bytes]]
+
+    def start(self, *arguments: str) -> None:
+        """Start `pbdag ARGUMENTS` with the service's settings (stopped with it)."""
+        with self.log.open("ab") as log:
+            self.processes.append(
+                subprocess.Popen(
+                    [sys.executable, "-m", "service.cli", *arguments],
+                    env=self.env,
+                    cwd=REPO,
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                )
+            )
+
+
+@contextlib.contextmanager
+def running_service(data: Path, *serve_options: str, **settings: str) -> Iterator[Service]:
+    """`pbdag serve` (with its worker unless `--no-worker`) on a free loopback port, SQLite and
+    blobs under `data`, `settings` as PBDAG_* variables."""
     port = free_port()
     env = {
         **os.environ,
         "PBDAG_DATA_DIR": str(data),
         "PBDAG_ALLOW_ANONYMOUS_LOCAL": "true",  # the ingest runs on 127.0.0.1
         "PBDAG_RATE_LIMIT_PER_MINUTE": "0",  # --wait polls batch statuses
+        **{f"PBDAG_{name.upper()}": value for name, value in settings.items()},
     }
     env.pop("PBDAG_DATABASE_URL", None)  # SQLite in the data directory
-    with (data / "service.log").open("ab") as log:
-        process = subprocess.Popen(
-            [sys.executable, "-m", "service.cli", "serve", "--port", str(port)],
-            env=env,
-            cwd=REPO,
-            stdout=log,
-            stderr=subprocess.STDOUT,
-        )
-    url = f"http://127.0.0.1:{port}"
+    service = Service(f"http://127.0.0.1:{port}", env, data / "service.log", [])
+    service.start("serve", "--port", str(port), *serve_options)
     try:
-        wait_healthy(url)
-        yield url
+        wait_healthy(service.url)
+        yield service
     finally:
-        process.terminate()
-        process.wait(timeout=30)
+        for process in service.processes:
+            process.terminate()
+        for process in service.processes:
+            process.wait(timeout=30)
+
+
+@pytest.fixture(scope="session")
+def service_url(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """The URL of the service the ingest tests share."""
+    with running_service(tmp_path_factory.mktemp("service")) as service:
+        yield service.url
 
 
 @dataclass(frozen=True)

@@ -2,15 +2,19 @@
 
 from __future__ import annotations
 
+import re
 import shutil
+import threading
+import time
 from pathlib import Path
 
+import httpx
 import numpy as np
 import pytest
 
 from ingest.folder import FolderSource
 from service.cli import main
-from tests.ingest.conftest import FRAMES, Recordings
+from tests.ingest.conftest import FRAMES, Recordings, running_service
 from tests.ingest.service_checks import batch_status, events, nodes, scene_id
 
 
@@ -73,6 +77,62 @@ def test_ingesting_the_same_folder_again_adds_nothing(
     assert "(created)" in first and "(existing)" in second
     assert "batches posted 2 (2 accepted before)" in second
     assert len(events(service_url, scene)) == before
+
+
+def test_new_content_under_old_batch_ids_is_refused_with_the_reason(
+    recordings: Recordings, service_url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    arguments = ("--limit", "2", "--batch-prefix", "conflict", "--no-progress")
+    assert ingest_folder(recordings, service_url, "folder-conflict", *arguments) == 0
+    assert (
+        ingest_folder(recordings, service_url, "folder-conflict", *arguments, "--stride", "2") == 2
+    )
+    error = capsys.readouterr().err
+    assert "post batch conflict-000000: HTTP 409" in error
+    assert "already posted with different content" in error
+
+
+def test_a_full_scene_queue_is_waited_out(
+    recordings: Recordings, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """One unfinished batch per scene and no worker yet: the second post is a 429 (Retry-After
+    1 s), repeated until a worker starts and catches up."""
+    with running_service(
+        tmp_path,
+        "--no-worker",
+        max_queued_batches_per_scene="1",
+        queue_full_retry_after_seconds="1",
+    ) as service:
+        arguments = ("--limit", "12", "--frames-per-batch", "4", "--no-progress", "--wait")
+        codes: list[int] = []
+        sender = threading.Thread(
+            target=lambda: codes.append(
+                ingest_folder(recordings, service.url, "folder-full", *arguments)
+            )
+        )
+        sender.start()
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not first_batch_queued(service.url):
+            time.sleep(0.1)
+        time.sleep(2.0)  # the second batch meets the full queue meanwhile
+        service.start("worker")
+        sender.join(timeout=120)
+        assert codes == [0]
+        out = capsys.readouterr().out
+        assert re.search(r"batches posted 3, [1-9]\d* requests repeated after a busy reply", out)
+        scene = scene_id(service.url, "folder-full")
+        assert [
+            batch_status(service.url, scene, f"kitchen-{n:06d}")["status"] for n in range(3)
+        ] == ["done"] * 3
+
+
+def first_batch_queued(url: str) -> bool:
+    """Whether the scene `folder-full` exists and holds its first batch."""
+    scenes = httpx.get(f"{url}/v1/scenes").json()["scenes"]
+    found = [scene["id"] for scene in scenes if scene["name"] == "folder-full"]
+    return bool(found) and (
+        httpx.get(f"{url}/v1/scenes/{found[0]}/batches/kitchen-000000").status_code == 200
+    )
 
 
 def test_stride_and_limit_choose_the_frames(
