@@ -80,6 +80,11 @@ def load_detector(name: str, options: Mapping[str, str]) -> Detector:
     detector = factory(options)
     if not callable(getattr(detector, "detect", None)):
         raise IngestError(f"detector {name!r} has no detect(frame, source) method")
+    topics = getattr(detector, "topics", None)
+    if not isinstance(topics, tuple) or not all(isinstance(t, str) for t in topics):
+        raise IngestError(
+            f"detector {name!r} must have `topics`, a tuple of bag topic names (empty for none)"
+        )
     return detector
 
 

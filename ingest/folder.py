@@ -21,6 +21,7 @@ from ingest.frames import (
 
 DEPTH_NAME = re.compile(r"^frame-(\d+)\.depth\.png$")
 INTRINSICS_FILE = "camera-intrinsics.txt"
+UINT16_MAX = 65535
 
 
 def read_intrinsics(path: Path, width: int, height: int) -> CameraIntrinsics:
@@ -120,11 +121,14 @@ class FolderSource:
                 self.counts.skip("pose is not finite (tracking lost)")
                 continue
             with Image.open(depth_file) as image:
-                depth = np.asarray(image)
-            if depth.dtype != np.uint16:
-                depth = depth.astype(np.uint16) if depth.dtype == np.int32 else depth
-            if depth.dtype != np.uint16 or depth.ndim != 2:
-                raise IngestError(f"{depth_file}: expected a 16-bit single-channel PNG")
+                if image.mode not in ("I;16", "I;16B", "I"):
+                    raise IngestError(
+                        f"{depth_file}: expected a 16-bit single-channel PNG, got mode {image.mode}"
+                    )
+                pixels = np.asarray(image)
+            if pixels.min() < 0 or pixels.max() > UINT16_MAX:  # mode I holds 32-bit values
+                raise IngestError(f"{depth_file}: depth values outside 0..{UINT16_MAX}")
+            depth = pixels.astype(np.uint16)
             if intrinsics is None or (intrinsics.height, intrinsics.width) != depth.shape:
                 intrinsics = read_intrinsics(
                     self.path / INTRINSICS_FILE, width=depth.shape[1], height=depth.shape[0]

@@ -8,6 +8,7 @@ depth and pose, as a real segmenter's would.
 
 from __future__ import annotations
 
+import functools
 import json
 import shutil
 from dataclasses import dataclass
@@ -17,7 +18,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from PIL import Image
-from rosbags.rosbag2 import Writer
+from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from ingest.transforms import invert, quaternion_of, rigid
@@ -72,6 +73,7 @@ class Box:
     half: float
 
 
+@functools.cache
 def boxes(kitchen: Path) -> list[Box]:
     """The instance boxes, anchored on frame 0's surfaces."""
     depth, pose = load_frame(kitchen, 0)
@@ -91,6 +93,13 @@ def instance_image(
     return ids
 
 
+@functools.cache
+def frame_instances(kitchen: Path, index: int) -> npt.NDArray[np.uint16]:
+    """The instance image of a real frame (computed once for all recordings)."""
+    depth, pose = load_frame(kitchen, index)
+    return instance_image(depth, pose, boxes(kitchen))
+
+
 def write_label_map(path: Path) -> Path:
     """The test label map (JSON)."""
     path.write_text(json.dumps(LABEL_MAP))
@@ -104,13 +113,11 @@ def write_folder(kitchen: Path, out: Path, frames: int) -> Path:
     masks = out / "masks"
     masks.mkdir()
     shutil.copy(kitchen / "camera-intrinsics.txt", out / "camera-intrinsics.txt")
-    instance_boxes = boxes(kitchen)
     for index in range(frames):
         stem = f"frame-{index:06d}"
         for suffix in (".depth.png", ".pose.txt"):
             (out / f"{stem}{suffix}").symlink_to(kitchen / f"{stem}{suffix}")
-        depth, pose = load_frame(kitchen, index)
-        Image.fromarray(instance_image(depth, pose, instance_boxes)).save(masks / f"{stem}.png")
+        Image.fromarray(frame_instances(kitchen, index)).save(masks / f"{stem}.png")
     return out
 
 
@@ -202,6 +209,7 @@ def write_bag(
     without_tf: frozenset[int] = frozenset(),
     without_labels: frozenset[int] = frozenset(),
     float_depth: bool = False,
+    mcap: bool = False,
 ) -> Path:
     """A ROS 2 bag of the first `frames` frames: /camera/depth (16UC1 mm, or 32FC1 m),
     /camera/camera_info, /camera/instances (16UC1 ids), /tf, /tf_static and /odom.
@@ -209,10 +217,10 @@ def write_bag(
     /tf and /odom are stamped 4 ms after each depth image (inside the pose tolerance); frames
     in `without_tf` have neither, frames in `without_labels` no label image."""
     typestore = get_typestore(Stores.ROS2_HUMBLE)
-    instance_boxes = boxes(kitchen)
     odom_to_map = invert(MAP_TO_ODOM)
     camera_to_base = invert(BASE_TO_CAMERA)
-    with Writer(out, version=9) as writer:
+    storage = StoragePlugin.MCAP if mcap else StoragePlugin.SQLITE3
+    with Writer(out, version=9, storage_plugin=storage) as writer:
         add = writer.add_connection
         depth_topic = add("/camera/depth", "sensor_msgs/msg/Image", typestore=typestore)
         info_topic = add("/camera/camera_info", "sensor_msgs/msg/CameraInfo", typestore=typestore)
@@ -258,6 +266,6 @@ def write_bag(
             write(info_topic, ns, _camera_info(typestore, ns))
             write(depth_topic, ns, _image(typestore, ns, pixels, encoding))
             if index not in without_labels:  # recorded a moment after the depth, same stamp
-                ids = instance_image(depth, pose, instance_boxes)
+                ids = frame_instances(kitchen, index)
                 write(label_topic, ns + 1, _image(typestore, ns, ids, "16UC1"))
     return out

@@ -155,3 +155,42 @@ def test_label_images_come_from_the_synchronised_message(labels: Path) -> None:
     np.testing.assert_array_equal(found[1].mask, instances() == 2)
     with pytest.raises(SkipFrame, match="no /ids message"):
         detector.detect(frame(), NoSource())
+
+
+class FakeEntryPoint:
+    """An installed plugin's entry point (what importlib.metadata gives)."""
+
+    def __init__(self, factory: object) -> None:
+        self.factory = factory
+
+    def load(self) -> object:
+        return self.factory
+
+
+def test_a_plugin_must_follow_the_protocol(monkeypatch: pytest.MonkeyPatch) -> None:
+    class NoTopics:
+        def __init__(self, options: dict[str, str]) -> None:
+            self.options = options
+
+        def detect(self, frame: SourceFrame, source: object) -> list[object]:
+            return []
+
+    class NoDetect:
+        topics = ()
+
+        def __init__(self, options: dict[str, str]) -> None:
+            pass
+
+    class Fine(NoTopics):
+        topics = ("/camera/color",)
+
+    plugins = {
+        name: FakeEntryPoint(f) for name, f in (("a", NoTopics), ("b", NoDetect), ("c", Fine))
+    }
+    monkeypatch.setattr("ingest.detectors.available_detectors", lambda: plugins)
+    with pytest.raises(IngestError, match="'a' must have `topics`, a tuple of bag topic names"):
+        load_detector("a", {})
+    with pytest.raises(IngestError, match="'b' has no detect"):
+        load_detector("b", {})
+    fine = load_detector("c", {"threshold": "0.6"})
+    assert isinstance(fine, Fine) and fine.options == {"threshold": "0.6"}

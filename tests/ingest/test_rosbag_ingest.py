@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from ingest.detectors import load_detector
 from ingest.frames import IngestError
 from ingest.rosbag import OdomPose, RosbagSource, TfPose
 from ingest.transforms import invert
@@ -111,6 +112,24 @@ def test_float_depth_is_read_as_metres(recordings: Recordings, real_kitchen: Pat
         metres = frames[3].depth_metres()
         assert frames[3].depth.dtype == np.float32
         np.testing.assert_allclose(metres, depth / 1000.0, atol=1e-6)  # NaN read as 0
+
+
+def test_mcap_bags_read_the_same_as_sqlite_ones(recordings: Recordings) -> None:
+    detector = load_detector(
+        "label-image", {"label-topic": "/camera/instances", "labels": str(recordings.labels)}
+    )
+    sqlite3 = bag_source(recordings.bag, TfPose("map"))
+    mcap = bag_source(recordings.mcap_bag, TfPose("map"))
+    pairs = list(zip(sqlite3.frames(detector.topics), mcap.frames(detector.topics), strict=False))
+    assert len(pairs) == 5 and mcap.counts.read == 5
+    for a, b in pairs:
+        assert a.stamp_ns == b.stamp_ns
+        np.testing.assert_array_equal(a.pose, b.pose)
+        np.testing.assert_array_equal(a.depth, b.depth)
+        found_a, found_b = detector.detect(a, sqlite3), detector.detect(b, mcap)
+        assert [d.label for d in found_b] == ["mug", "bowl", "book", "table"]
+        for x, y in zip(found_a, found_b, strict=True):
+            np.testing.assert_array_equal(x.mask, y.mask)
 
 
 def test_frames_without_a_pose_or_label_image_are_skipped_and_counted(
