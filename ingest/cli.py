@@ -14,6 +14,16 @@ from ingest.sink import SinkError
 DEFAULT_URL = "http://127.0.0.1:8000"
 
 
+class DefaultsFormatter(argparse.HelpFormatter):
+    """Help that shows an option's default when it has a value worth showing."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        help_text = action.help or ""
+        if action.default in (None, False, [], argparse.SUPPRESS) or "%(default)" in help_text:
+            return help_text
+        return f"{help_text} (default: %(default)s)"
+
+
 def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add `ingest` to the `pbdag` command."""
     ingest = commands.add_parser(
@@ -24,9 +34,9 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     folder = sources.add_parser(
         "folder",
         help="a 7-Scenes/TUM-like folder: frame-NNNNNN.depth.png, .pose.txt, camera-intrinsics.txt",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsFormatter,
     )
-    folder.add_argument("path", type=Path, metavar="PATH")
+    folder.add_argument("path", type=Path, metavar="PATH", help="the folder")
     folder.add_argument(
         "--fps", type=float, default=30.0, help="frame rate that turns frame numbers into times"
     )
@@ -36,11 +46,13 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     rosbag = sources.add_parser(
         "rosbag",
         help="a ROS 2 bag (sqlite3 or mcap): depth Image, CameraInfo, pose from /tf or odometry",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsFormatter,
     )
     rosbag.add_argument("bag", type=Path, metavar="BAG", help="the bag's folder")
     rosbag.add_argument(
-        "--depth-topic", required=True, help="sensor_msgs/Image, 16UC1 (mm) or 32FC1 (m)"
+        "--depth-topic",
+        required=True,
+        help="sensor_msgs/Image: 16UC1 (see --depth-scale) or 32FC1 (m)",
     )
     rosbag.add_argument("--camera-info-topic", required=True, help="sensor_msgs/CameraInfo")
     pose = rosbag.add_mutually_exclusive_group(required=True)
@@ -72,7 +84,7 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
         "--sync-tolerance",
         type=float,
         default=0.02,
-        help="seconds between a depth stamp and its camera info or detector messages",
+        help="seconds between a depth stamp and its detector topics' messages",
     )
     _common_options(rosbag)
     rosbag.set_defaults(handler=_run_rosbag)
@@ -99,8 +111,15 @@ def _common_options(parser: argparse.ArgumentParser) -> None:
         "--depth-scale", type=float, default=0.001, help="metres per unit of 16-bit depth"
     )
     parser.add_argument("--stride", type=int, default=1, help="take every Nth frame")
-    parser.add_argument("--limit", type=int, help="take at most N frames")
-    parser.add_argument("--frames-per-batch", type=int, default=8)
+    parser.add_argument(
+        "--limit", type=int, help="only the first N frames the stride takes (skipped ones count)"
+    )
+    parser.add_argument(
+        "--frames-per-batch",
+        type=int,
+        default=8,
+        help="frames per batch (the service takes at most PBDAG_MAX_FRAMES_PER_BATCH, 16)",
+    )
     parser.add_argument("--batch-prefix", help="batch ids' prefix (default: the recording's name)")
     parser.add_argument("--wait", action="store_true", help="wait until every batch is processed")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -42,7 +42,11 @@ class IngestSummary:
             verb = "created" if sink.scene_created else "existing"
             lines.append(
                 f"scene {sink.scene_id} ({verb}): batches posted {sink.posted}"
-                + (f" ({sink.already_accepted} accepted before)" if sink.already_accepted else "")
+                + (
+                    f" ({len(sink.accepted_before)} accepted before)"
+                    if sink.accepted_before
+                    else ""
+                )
                 + (
                     f", {sink.busy_retries} requests repeated after a busy reply (429/503)"
                     if sink.busy_retries

@@ -3,8 +3,8 @@
 A frame is a depth image (`sensor_msgs/Image`, 16UC1 / mono16 or 32FC1) with the intrinsics of
 the nearest `sensor_msgs/CameraInfo` and a camera-to-map pose, either composed along the tf tree
 (/tf and /tf_static) or taken from an odometry topic (`nav_msgs/Odometry`) times a fixed
-camera-in-base transform. Everything is matched to the depth image's header stamp: the nearest
-message within a tolerance, otherwise the frame is skipped and counted.
+camera-in-base transform. Poses and detector topics are matched to the depth image's header
+stamp: the nearest message within a tolerance, otherwise the frame is skipped and counted.
 """
 
 from __future__ import annotations
@@ -28,13 +28,21 @@ from ingest.frames import (
     check_stride_and_limit,
     frame_window,
 )
-from ingest.transforms import Matrix, TransformLookupError, TransformTree, nearest, rigid
+from ingest.transforms import (
+    DisconnectedFrames,
+    Matrix,
+    TransformLookupError,
+    TransformTree,
+    nearest,
+    rigid,
+)
 
 IMAGE = "sensor_msgs/msg/Image"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
+INT64_MAX = 2**63 - 1
 # (depth stamp in ns, the depth image's frame_id) -> camera-to-map pose
 Poser = Callable[[int, str], Matrix]
 
@@ -198,14 +206,19 @@ class RosbagSource:
                     continue
                 image: Any = reader.deserialize(raw, connection.msgtype)
                 stamp = stamp_ns(image.header)
-                info_index = nearest(infos[0], stamp, self.sync_tolerance_ns)
-                if info_index is None:
-                    self.counts.skip(f"no {self.camera_info_topic} message near the depth stamp")
-                    continue
+                # The nearest camera info at any distance: drivers may publish it once (latched),
+                # and intrinsics change only with the camera's mode.
+                info_index = nearest(infos[0], stamp, INT64_MAX)
+                assert info_index is not None  # there is at least one
                 intrinsics = infos[1][info_index]
                 camera_frame = str(image.header.frame_id)
                 try:
                     pose = poser(stamp, camera_frame)
+                except DisconnectedFrames as error:
+                    raise IngestError(
+                        f"{error} (the camera frame is the depth images' frame_id "
+                        f"{camera_frame!r} unless --camera-frame names another)"
+                    ) from error
                 except TransformLookupError as error:
                     self.counts.skip(f"no pose: {_shorten(str(error))}")
                     continue

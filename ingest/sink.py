@@ -32,9 +32,9 @@ class SinkResult:
     scene_id: str
     scene_created: bool
     posted: int = 0
-    already_accepted: int = 0  # the same batch was accepted before (idempotent re-send)
+    accepted_before: set[str] = field(default_factory=set)  # the same batch sent before
     statuses: dict[str, str] = field(default_factory=dict)  # batch id -> last known status
-    events_appended: int | None = None  # known when waited for
+    events_appended: int | None = None  # by the batches first accepted now; known when waited
     errors: dict[str, str] = field(default_factory=dict)  # dead batch id -> its error
     busy_retries: int = 0  # requests repeated after a 429 (queue full, rate limit) or a 503
 
@@ -139,7 +139,8 @@ def post_batches(
                 raise _problem(response, action)
             status = str(response.json()["status"])
             result.posted += 1
-            result.already_accepted += response.status_code == 200
+            if response.status_code == 200:
+                result.accepted_before.add(batch.batch_id)
             result.statuses[batch.batch_id] = status
             if on_posted is not None:
                 on_posted(batch, status)
@@ -148,46 +149,34 @@ def post_batches(
         return result
 
 
+def _status(client: httpx.Client, result: SinkResult, batch_id: str) -> dict[str, Any]:
+    """One batch's status record."""
+    action = f"status of batch {batch_id}"
+    path = f"/v1/scenes/{result.scene_id}/batches/{batch_id}"
+    response = _request(client, "GET", path, action, result)
+    if response.status_code != 200:
+        raise _problem(response, action)
+    record: dict[str, Any] = response.json()
+    result.statuses[batch_id] = str(record["status"])
+    return record
+
+
 def _wait(client: httpx.Client, result: SinkResult, timeout: float) -> None:
-    """Poll the batches' statuses until each is done or dead (or the timeout passes)."""
+    """Poll the batches until each is done or dead (or the timeout passes); count the events
+    that the batches accepted in this run appended."""
     deadline = time.monotonic() + timeout
-    pending = [
-        batch_id for batch_id, status in result.statuses.items() if status not in FINAL_STATUSES
-    ]
     appended = 0
-    records: dict[str, dict[str, Any]] = {}
-    # Batches of a scene are processed in order: poll the oldest pending one, then move on.
-    while pending:
-        batch_id = pending[0]
-        action = f"status of batch {batch_id}"
-        response = _request(
-            client, "GET", f"/v1/scenes/{result.scene_id}/batches/{batch_id}", action, result
-        )
-        if response.status_code != 200:
-            raise _problem(response, action)
-        record = response.json()
-        result.statuses[batch_id] = str(record["status"])
-        if record["status"] in FINAL_STATUSES:
-            records[batch_id] = record
-            pending.pop(0)
-            continue
-        if time.monotonic() > deadline:
-            raise SinkError(
-                f"{len(pending)} batches still not processed after {timeout:g} s "
-                f"(batch {batch_id} is {record['status']})"
-            )
-        time.sleep(0.2)
-    for batch_id in result.statuses:
-        record = records.get(batch_id)
-        if record is None:  # final when posted (re-sent): read it once
-            response = _request(
-                client, "GET", f"/v1/scenes/{result.scene_id}/batches/{batch_id}", batch_id
-            )
-            if response.status_code != 200:
-                raise _problem(response, f"status of batch {batch_id}")
-            record = response.json()
+    # Batches of a scene are processed in order: poll the oldest unfinished one, then the next.
+    for batch_id in list(result.statuses):
+        record = _status(client, result, batch_id)
+        while record["status"] not in FINAL_STATUSES:
+            if time.monotonic() > deadline:
+                raise SinkError(f"batch {batch_id} is still {record['status']} after {timeout:g} s")
+            time.sleep(0.2)
+            record = _status(client, result, batch_id)
         if record["status"] == "dead":
             result.errors[batch_id] = str(record.get("error"))
-        if record.get("first_seq") is not None and record.get("last_seq") is not None:
-            appended += int(record["last_seq"]) - int(record["first_seq"]) + 1
+        first, last = record.get("first_seq"), record.get("last_seq")
+        if batch_id not in result.accepted_before and first is not None and last is not None:
+            appended += int(last) - int(first) + 1
     result.events_appended = appended

@@ -79,7 +79,11 @@ class TimedTransforms:
 
 
 class TransformLookupError(Exception):
-    """A transform chain that cannot be composed; the message says which link is missing."""
+    """A transform chain that cannot be composed at a stamp; the message says which link."""
+
+
+class DisconnectedFrames(TransformLookupError):
+    """Frames the tree does not hold or connect at any time (a naming error, not a gap)."""
 
 
 class TransformTree:
@@ -137,7 +141,7 @@ class TransformTree:
         known = self.frames()
         for role, name in (("target", target), ("source", source)):
             if name not in known:
-                raise TransformLookupError(
+                raise DisconnectedFrames(
                     f"frame {name!r} ({role}) is not in the transforms; frames seen: "
                     f"{', '.join(sorted(known)) or 'none'}"
                 )
@@ -145,7 +149,7 @@ class TransformTree:
         up_from_target = self._ancestors(target)
         common = next((frame for frame in up_from_source if frame in up_from_target), None)
         if common is None:
-            raise TransformLookupError(
+            raise DisconnectedFrames(
                 f"frames {target!r} and {source!r} are not connected: their roots are "
                 f"{up_from_target[-1]!r} and {up_from_source[-1]!r}"
             )

@@ -82,7 +82,7 @@ class Recordings:
     folder: Path
     bag: Path
     gappy_bag: Path  # frame 7 has no /tf nor /odom, frame 12 no label image
-    float_bag: Path  # 32FC1 depth in metres, NaN where there is no measurement
+    float_bag: Path  # 32FC1 depth in metres (NaN: no measurement), one latched camera info
     mcap_bag: Path  # the first 5 frames in MCAP storage
     labels: Path
 
@@ -101,7 +101,9 @@ def recordings(real_kitchen: Path, tmp_path_factory: pytest.TempPathFactory) -> 
             without_tf=frozenset({7}),
             without_labels=frozenset({12}),
         ),
-        float_bag=write_bag(real_kitchen, root / "float_bag", 5, float_depth=True),
+        float_bag=write_bag(
+            real_kitchen, root / "float_bag", 5, float_depth=True, camera_info_once=True
+        ),
         mcap_bag=write_bag(real_kitchen, root / "mcap_bag", 5, mcap=True),
         labels=write_label_map(root / "labels.json"),
     )

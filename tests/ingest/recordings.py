@@ -210,12 +210,14 @@ def write_bag(
     without_labels: frozenset[int] = frozenset(),
     float_depth: bool = False,
     mcap: bool = False,
+    camera_info_once: bool = False,
 ) -> Path:
     """A ROS 2 bag of the first `frames` frames: /camera/depth (16UC1 mm, or 32FC1 m),
     /camera/camera_info, /camera/instances (16UC1 ids), /tf, /tf_static and /odom.
 
     /tf and /odom are stamped 4 ms after each depth image (inside the pose tolerance); frames
-    in `without_tf` have neither, frames in `without_labels` no label image."""
+    in `without_tf` have neither, frames in `without_labels` no label image. With
+    `camera_info_once` the camera info is published with the first frame only (latched)."""
     typestore = get_typestore(Stores.ROS2_HUMBLE)
     odom_to_map = invert(MAP_TO_ODOM)
     camera_to_base = invert(BASE_TO_CAMERA)
@@ -263,7 +265,8 @@ def write_bag(
                 pixels = depth.astype(np.float32) / 1000.0
                 pixels[depth == 0] = np.nan
                 encoding = "32FC1"
-            write(info_topic, ns, _camera_info(typestore, ns))
+            if index == 0 or not camera_info_once:
+                write(info_topic, ns, _camera_info(typestore, ns))
             write(depth_topic, ns, _image(typestore, ns, pixels, encoding))
             if index not in without_labels:  # recorded a moment after the depth, same stamp
                 ids = frame_instances(kitchen, index)

@@ -79,6 +79,7 @@ def test_ingesting_the_same_folder_again_adds_nothing(
     second = capsys.readouterr().out
     assert "(created)" in first and "(existing)" in second
     assert "batches posted 2 (2 accepted before)" in second
+    assert "events appended: 0" in second and "events appended: 0" not in first
     assert len(events(service_url, scene)) == before
 
 
