@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import re
 import shutil
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -17,7 +19,7 @@ from ingest.folder import FolderSource
 from ingest.frames import FrameSource, SkipFrame, SourceFrame
 from ingest.pipeline import ingest
 from service.cli import main
-from tests.ingest.conftest import FRAMES, Recordings, running_service
+from tests.ingest.conftest import FRAMES, REPO, Recordings, running_service
 from tests.ingest.service_checks import batch_status, events, nodes, scene_id
 
 
@@ -250,3 +252,27 @@ def test_a_detector_of_ones_own_runs_through_the_same_pipeline(
     log = events(service_url, summary.sink.scene_id)
     assert any(e["type"] == "add" and e["details"]["kind"] == "object" for e in log)
     assert "  skipped 3: model not sure" in summary.lines()
+
+
+def test_a_service_that_needs_a_token_gets_it_from_the_flag(
+    recordings: Recordings, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with running_service(tmp_path, allow_anonymous_local="false") as service:
+        arguments = ("--limit", "2", "--no-progress")
+        assert ingest_folder(recordings, service.url, "folder-token", *arguments) == 2
+        assert "list scenes: HTTP 401" in capsys.readouterr().err
+        create = ["token", "create", "--name", "ingest", "--scope", "write"]
+        created = subprocess.run(
+            [sys.executable, "-m", "service.cli", *create],
+            env=service.env,
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        token = created.stdout.strip()
+        assert (
+            ingest_folder(recordings, service.url, "folder-token", *arguments, "--token", token)
+            == 0
+        )
+        assert "frames read: 2, sent: 2" in capsys.readouterr().out

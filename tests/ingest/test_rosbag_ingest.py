@@ -199,6 +199,15 @@ def test_a_bag_becomes_the_same_scene_as_the_folder(
         assert distance < 0.01, (label, distance)
 
 
+def test_odometry_poses_through_the_command(
+    recordings: Recordings, service_url: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    extrinsic = ["0.1", "0", "0.3", "-0.5", "0.5", "-0.5", "0.5"]  # BASE_TO_CAMERA
+    arguments = ["--odom-topic", "/odom", "--camera-in-base", *extrinsic, "--limit", "4"]
+    assert ingest_bag(recordings.bag, service_url, "bag-odom", *arguments, "--no-progress") == 0
+    assert "frames read: 4, sent: 4 (with 0 detections)" in capsys.readouterr().out
+
+
 @pytest.mark.parametrize(
     ("arguments", "message"),
     [
@@ -215,6 +224,11 @@ def test_a_bag_becomes_the_same_scene_as_the_folder(
             "frame 'world' is not in the bag's transforms; frames: base_link, camera_optical, map, odom",
         ),
         (("--tf",), "--tf needs --map-frame"),
+        (("--odom-topic", "/odom", "--map-frame", "map"), "--map-frame goes with --tf"),
+        (
+            ("--odom-topic", "/odom", "--camera-in-base", "0", "0", "0", "0", "0", "0", "0"),
+            "a zero quaternion is not a rotation",
+        ),
         (("--odom-topic", "/wheel_odom"), "odometry topic '/wheel_odom' is not in bag"),
         (
             (
