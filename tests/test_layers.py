@@ -49,6 +49,9 @@ FORBIDDEN = {
         "open3d",
         "pycocotools",
     },
+    # Recorded data in, batches out over HTTP: the wire models only, never the service's insides
+    # or the method itself (a user's robot has neither).
+    "ingest": {"core", "service", "sim", "evaluation", "bench", "tests", "sqlalchemy", "fastapi"},
 }
 # Packages whose module graph must stay acyclic (checked module by module, not just by package).
 ACYCLIC = ("sim", "evaluation")

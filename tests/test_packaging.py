@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from evaluation import cli as evaluation_cli
+from ingest import cli as ingest_cli
 from service.cli import main
 from tests.test_layers import ROOT, imported_roots
 
@@ -32,12 +33,17 @@ def project() -> dict[str, object]:
     return table
 
 
-def eval_only_modules() -> set[str]:
-    """Import names of the `eval` extra's distributions that the service does not depend on."""
+def extra_only_modules(extra_name: str = "eval") -> set[str]:
+    """Import names of an extra's distributions that the service does not depend on."""
     table = project()
     runtime = {distribution(r) for r in table["dependencies"]}  # type: ignore[attr-defined]
-    extra = {distribution(r) for r in table["optional-dependencies"]["eval"]}  # type: ignore[index]
+    extra = {distribution(r) for r in table["optional-dependencies"][extra_name]}  # type: ignore[index]
     return {IMPORT_NAMES.get(name, name) for name in extra - runtime}
+
+
+def eval_only_modules() -> set[str]:
+    """Import names of the `eval` extra's distributions that the service does not depend on."""
+    return extra_only_modules("eval")
 
 
 def test_the_eval_extra_holds_the_evaluation_stack_and_the_service_none_of_it() -> None:
@@ -51,9 +57,15 @@ def test_the_eval_extra_holds_the_evaluation_stack_and_the_service_none_of_it() 
     assert set(evaluation_cli.EVAL_EXTRA) == eval_only_modules()
 
 
+def test_pbdag_ingest_checks_the_extra_it_asks_for() -> None:
+    assert (
+        set(ingest_cli.INGEST_EXTRA) == extra_only_modules("ingest") == {"rosbags", "yaml", "tqdm"}
+    )
+
+
 @pytest.mark.parametrize("package", SERVICE_PACKAGES)
 def test_service_packages_import_no_eval_only_distribution(package: str) -> None:
-    forbidden = eval_only_modules()
+    forbidden = eval_only_modules() | extra_only_modules("ingest")
     modules = sorted((ROOT / package).rglob("*.py"))
     assert modules
     found = {
@@ -73,3 +85,13 @@ def test_pbdag_eval_without_the_extra_fails_in_one_line(
     lines = captured.err.splitlines()
     assert len(lines) == 1 and "install pbdag[eval]" in lines[0] and "matplotlib" in lines[0]
     assert not Path("unused").exists()
+
+
+def test_pbdag_ingest_without_the_extra_fails_in_one_line(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], tmp_path: Path
+) -> None:
+    monkeypatch.setitem(ingest_cli.INGEST_EXTRA, "no_such_module_pbdag", "rosbags")
+    assert main(["ingest", "folder", str(tmp_path), "--scene", "s"]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and "pbdag[ingest]" in lines[0] and "rosbags" in lines[0]
