@@ -1,20 +1,23 @@
-"""The one place that talks HTTP to the service: find or create the scene, post each batch,
-optionally wait until the batches are processed.
+"""The one place that talks to the service, through the typed client: find or create the scene,
+post each batch, optionally wait until the batches are processed.
 
-Everything else in `ingest` builds `api_schema` models; swapping this module for a typed client
-changes nothing else.
+Everything else in `ingest` builds `api_schema` models.
 """
 
 from __future__ import annotations
 
+import functools
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TypeVar
 
 import httpx
 
-from api_schema.requests import BatchIn, SceneCreate
+from api_schema.requests import BatchIn
+from api_schema.responses import BatchStatus
+from pbdag_client import Client, PbdagError, RateLimited, ServerError
+from pbdag_client.errors import retry_after_seconds
 
 FINAL_STATUSES = frozenset({"done", "dead"})
 # A full queue (429) or a busy database (503) says when to come back; give up after this long.
@@ -39,70 +42,55 @@ class SinkResult:
     busy_retries: int = 0  # requests repeated after a 429 (queue full, rate limit) or a 503
 
 
-def _problem(response: httpx.Response, action: str) -> SinkError:
-    """A readable error of a refused request (problem+json: detail and field)."""
-    try:
-        body: Any = response.json()
-    except ValueError:
-        body = None
-    if isinstance(body, dict):
-        detail = body.get("detail") or body.get("title") or response.text
-        where = f" (field {body['field']})" if body.get("field") else ""
-        return SinkError(f"{action}: HTTP {response.status_code}: {detail}{where}")
-    return SinkError(f"{action}: HTTP {response.status_code}: {response.text[:500]}")
+_T = TypeVar("_T")
 
 
-def _request(
-    client: httpx.Client,
-    method: str,
-    path: str,
-    action: str,
-    result: SinkResult | None = None,
-    **kwargs: Any,
-) -> httpx.Response:
-    """One request; 429 and 503 are retried after the Retry-After the service sends (counted in
-    `result`)."""
+def _readable(error: PbdagError, action: str) -> SinkError:
+    """A refused request as one line: what was asked, the status, the detail and the field."""
+    where = f" (field {error.field})" if error.field else ""
+    return SinkError(f"{action}: HTTP {error.status}: {error.detail}{where}")
+
+
+def _call(
+    client: Client, action: str, request: Callable[[], _T], result: SinkResult | None = None
+) -> _T:
+    """One request through the typed client; a 429 (queue full, rate limit) or a 503 (database
+    busy) is repeated after the Retry-After the service sends (counted in `result`)."""
     waited = 0.0
     while True:
         try:
-            response = client.request(method, path, **kwargs)
+            return request()
+        except (RateLimited, ServerError) as error:
+            if error.status not in (429, 503) or waited >= MAX_BACKOFF_SECONDS:
+                raise _readable(error, action) from error
+            delay = retry_after_seconds(error.headers.get("retry-after"))
+            delay = min(max(1.0 if delay is None else delay, 0.1), 30.0)
+            time.sleep(delay)
+            waited += delay
+            if result is not None:
+                result.busy_retries += 1
+        except PbdagError as error:
+            raise _readable(error, action) from error
         except httpx.TransportError as error:
             raise SinkError(f"{action}: cannot reach {client.base_url}: {error}") from error
-        if response.status_code not in (429, 503) or waited >= MAX_BACKOFF_SECONDS:
-            return response
-        try:
-            delay = float(response.headers.get("retry-after", "1"))
-        except ValueError:
-            delay = 1.0
-        delay = min(max(delay, 0.1), 30.0)
-        time.sleep(delay)
-        waited += delay
-        if result is not None:
-            result.busy_retries += 1
 
 
-def find_or_create_scene(client: httpx.Client, scene: str) -> tuple[str, bool]:
+def find_or_create_scene(client: Client, scene: str) -> tuple[str, bool]:
     """(scene id, created): the scene whose id or name is `scene`, else a new one named so."""
-    response = _request(client, "GET", "/v1/scenes", "list scenes")
-    if response.status_code != 200:
-        raise _problem(response, "list scenes")
-    scenes = response.json()["scenes"]
-    by_id = [entry for entry in scenes if entry["id"] == scene]
+    scenes = _call(client, "list scenes", client.scenes)
+    by_id = [entry for entry in scenes if entry.id == scene]
     if by_id:
-        return str(by_id[0]["id"]), False
-    named = [entry for entry in scenes if entry["name"] == scene]
+        return by_id[0].id, False
+    named = [entry for entry in scenes if entry.name == scene]
     if len(named) > 1:
-        ids = ", ".join(entry["id"] for entry in named)
+        ids = ", ".join(entry.id for entry in named)
         raise SinkError(
             f"{len(named)} scenes are named {scene!r} ({ids}); pass one's id as --scene"
         )
     if named:
-        return str(named[0]["id"]), False
-    body = SceneCreate(name=scene).model_dump(mode="json", exclude_none=True)
-    response = _request(client, "POST", "/v1/scenes", f"create scene {scene!r}", json=body)
-    if response.status_code != 201:
-        raise _problem(response, f"create scene {scene!r}")
-    return str(response.json()["id"]), True
+        return named[0].id, False
+    created = _call(client, f"create scene {scene!r}", lambda: client.create_scene(scene))
+    return created.id, True
 
 
 def post_batches(
@@ -119,27 +107,19 @@ def post_batches(
     """Post `batches` (consumed lazily, one at a time) to the scene `scene` (an id, or a name:
     found, else created) of the service at `url`; with `wait`, poll until every batch is done or
     dead and count the events they appended."""
-    headers = {"Authorization": f"Bearer {token}"} if token else {}
-    with httpx.Client(
-        base_url=url.rstrip("/"), headers=headers, timeout=60.0, transport=transport
-    ) as client:
+    with Client(url, token, timeout=60.0, transport=transport) as client:
         scene_id, created = find_or_create_scene(client, scene)
         result = SinkResult(scene_id=scene_id, scene_created=created)
         for batch in batches:
-            action = f"post batch {batch.batch_id}"
-            response = _request(
+            submitted = _call(
                 client,
-                "POST",
-                f"/v1/scenes/{scene_id}/batches",
-                action,
+                f"post batch {batch.batch_id}",
+                functools.partial(client.submit_batch, scene_id, batch),
                 result,
-                json=batch.model_dump(mode="json", exclude_none=True),
             )
-            if response.status_code not in (200, 202):
-                raise _problem(response, action)
-            status = str(response.json()["status"])
+            status = submitted.status.status
             result.posted += 1
-            if response.status_code == 200:
+            if not submitted.new:
                 result.accepted_before.add(batch.batch_id)
             result.statuses[batch.batch_id] = status
             if on_posted is not None:
@@ -149,19 +129,19 @@ def post_batches(
         return result
 
 
-def _status(client: httpx.Client, result: SinkResult, batch_id: str) -> dict[str, Any]:
+def _status(client: Client, result: SinkResult, batch_id: str) -> BatchStatus:
     """One batch's status record."""
-    action = f"status of batch {batch_id}"
-    path = f"/v1/scenes/{result.scene_id}/batches/{batch_id}"
-    response = _request(client, "GET", path, action, result)
-    if response.status_code != 200:
-        raise _problem(response, action)
-    record: dict[str, Any] = response.json()
-    result.statuses[batch_id] = str(record["status"])
+    record = _call(
+        client,
+        f"status of batch {batch_id}",
+        lambda: client.batch(result.scene_id, batch_id),
+        result,
+    )
+    result.statuses[batch_id] = record.status
     return record
 
 
-def _wait(client: httpx.Client, result: SinkResult, timeout: float) -> None:
+def _wait(client: Client, result: SinkResult, timeout: float) -> None:
     """Poll the batches until each is done or dead (or the timeout passes); count the events
     that the batches accepted in this run appended."""
     deadline = time.monotonic() + timeout
@@ -169,14 +149,14 @@ def _wait(client: httpx.Client, result: SinkResult, timeout: float) -> None:
     # Batches of a scene are processed in order: poll the oldest unfinished one, then the next.
     for batch_id in list(result.statuses):
         record = _status(client, result, batch_id)
-        while record["status"] not in FINAL_STATUSES:
+        while record.status not in FINAL_STATUSES:
             if time.monotonic() > deadline:
-                raise SinkError(f"batch {batch_id} is still {record['status']} after {timeout:g} s")
+                raise SinkError(f"batch {batch_id} is still {record.status} after {timeout:g} s")
             time.sleep(0.2)
             record = _status(client, result, batch_id)
-        if record["status"] == "dead":
-            result.errors[batch_id] = str(record.get("error"))
-        first, last = record.get("first_seq"), record.get("last_seq")
+        if record.status == "dead":
+            result.errors[batch_id] = str(record.error)
+        first, last = record.first_seq, record.last_seq
         if batch_id not in result.accepted_before and first is not None and last is not None:
-            appended += int(last) - int(first) + 1
+            appended += last - first + 1
     result.events_appended = appended

@@ -7,7 +7,7 @@ Requests and answers are the `api_schema` models; error answers raise the typed 
 the wire's png16 depth and COCO RLE. It needs api_schema, httpx, numpy and pillow only.
 """
 
-from pbdag_client.client import DEFAULT_TIMEOUT_S, AsyncClient, Client
+from pbdag_client.client import DEFAULT_TIMEOUT_S, AsyncClient, Client, Submitted
 from pbdag_client.encoding import (
     build_batch,
     build_frame,
@@ -52,6 +52,7 @@ __all__ = [
     "PbdagError",
     "RateLimited",
     "ServerError",
+    "Submitted",
     "Unauthorized",
     "build_batch",
     "build_frame",

@@ -74,6 +74,19 @@ class _Call(Generic[T]):
     accept: str = "application/json"
 
 
+@dataclass(frozen=True)
+class Submitted:
+    """A posted batch: its status, and whether this post queued it (202) or the same batch had
+    been accepted before (200, the original's status)."""
+
+    status: BatchStatus
+    new: bool
+
+
+def _submitted(response: httpx.Response) -> Submitted:
+    return Submitted(BatchStatus.model_validate_json(response.content), response.status_code == 202)
+
+
 def _model(cls: type[M]) -> Callable[[httpx.Response], M]:
     return lambda response: cls.model_validate_json(response.content)
 
@@ -114,6 +127,10 @@ class _Routes:
     @staticmethod
     def post_batch(scene_id: str, batch: BatchIn) -> _Call[BatchStatus]:
         return _Call("POST", f"{_scene(scene_id)}/batches", _model(BatchStatus), body=batch)
+
+    @staticmethod
+    def submit_batch(scene_id: str, batch: BatchIn) -> _Call[Submitted]:
+        return _Call("POST", f"{_scene(scene_id)}/batches", _submitted, body=batch)
 
     @staticmethod
     def batch(scene_id: str, batch_id: str) -> _Call[BatchStatus]:
@@ -348,6 +365,10 @@ class Client:
         original's status, new content under its batch_id raises `Conflict`."""
         return self._send(_Routes.post_batch(scene_id, batch))
 
+    def submit_batch(self, scene_id: str, batch: BatchIn) -> Submitted:
+        """`post_batch`, also saying whether this post queued the batch or it was sent before."""
+        return self._send(_Routes.submit_batch(scene_id, batch))
+
     def batch(self, scene_id: str, batch_id: str) -> BatchStatus:
         """`GET .../batches/{batch_id}`: where a batch is, and the seqs it appended."""
         return self._send(_Routes.batch(scene_id, batch_id))
@@ -565,6 +586,10 @@ class AsyncClient:
     async def post_batch(self, scene_id: str, batch: BatchIn) -> BatchStatus:
         """`POST .../batches`."""
         return await self._send(_Routes.post_batch(scene_id, batch))
+
+    async def submit_batch(self, scene_id: str, batch: BatchIn) -> Submitted:
+        """`POST .../batches`, also saying whether this post queued the batch."""
+        return await self._send(_Routes.submit_batch(scene_id, batch))
 
     async def batch(self, scene_id: str, batch_id: str) -> BatchStatus:
         """`GET .../batches/{batch_id}`."""

@@ -99,6 +99,11 @@ def test_a_repost_is_idempotent_and_new_content_under_its_id_a_conflict(
     with Client(service.url) as client:
         again = client.post_batch(filled.scene_id, original)
         assert again == filled.done[0]  # the original's status, done, nothing appended twice
+        resubmitted = client.submit_batch(filled.scene_id, original)
+        assert not resubmitted.new and resubmitted.status == filled.done[0]
+        fresh = original.model_copy(update={"batch_id": "client-fresh"})
+        submitted = client.submit_batch(filled.scene_id, fresh)
+        assert submitted.new and submitted.status.batch_id == "client-fresh"
         changed = original.model_copy(update={"frames": original.frames[:1]})
         with pytest.raises(Conflict) as raised:
             client.post_batch(filled.scene_id, changed)

@@ -1,16 +1,16 @@
-"""Frames and detections on the wire: the service's own decoder reads back what ingest encodes."""
+"""Frames and detections on the wire: the service's own decoder reads back what ingest encodes
+(the encoders themselves are the typed client's, tested in tests/client/test_encoding.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from pycocotools import mask as coco_mask
 
 from api_schema.requests import FrameIn
 from ingest.detectors import Detection
 from ingest.frames import CameraIntrinsics, SourceFrame
-from ingest.wire import batches, compress_runs, encode_mask, frame_in, rle_runs
-from service.codec import compressed_rle_counts, decode_frames
+from ingest.wire import batches, frame_in
+from service.codec import decode_frames
 
 INTRINSICS = CameraIntrinsics(width=40, height=30, fx=50.0, fy=50.0, cx=20.0, cy=15.0)
 
@@ -32,23 +32,6 @@ def masks() -> list[np.ndarray]:
         box,
         *(rng.random(shape) < p for p in (0.05, 0.5, 0.95)),
     ]
-
-
-@pytest.mark.parametrize("index", range(8))
-def test_compressed_rle_is_pycocotools_and_decodes_in_the_service(index: int) -> None:
-    mask = masks()[index]
-    encoded = encode_mask(mask)
-    reference = coco_mask.encode(np.asfortranarray(mask.astype(np.uint8)))
-    assert encoded.counts == reference["counts"].decode("ascii")
-    assert encoded.size == [30, 40]
-    runs = compressed_rle_counts(str(encoded.counts))
-    np.testing.assert_array_equal(runs, rle_runs(mask))
-    assert int(runs.sum()) == mask.size
-
-
-def test_large_runs_survive_compression() -> None:
-    runs = [0, 5_000_000, 3, 70_000, 1, 2]
-    np.testing.assert_array_equal(compressed_rle_counts(compress_runs(runs)), runs)
 
 
 def frame(depth: np.ndarray) -> SourceFrame:
