@@ -1,5 +1,6 @@
-"""Tests of the simulator and the evaluation need the `eval` extra; without it they skip, saying so
-(a service-only install runs tests/service and tests/core)."""
+"""Tests of the simulator and the evaluation need the `eval` extra, tests of `pbdag ingest` the
+`ingest` extra; without them they skip, saying so (a service-only install runs tests/service and
+tests/core)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from evaluation.cli import missing_eval_distributions
+from ingest.cli import missing_ingest_extra
 
 
 def missing_reason() -> str | None:
@@ -42,3 +44,29 @@ def skip_modules_without_eval_extra(
     if missing_reason() is None:
         return None
     return NeedsEvalExtra.from_parent(parent, path=module_path)
+
+
+def ingest_missing_reason() -> str | None:
+    """Why the ingest extra's tests cannot run here, or None when they can."""
+    missing = missing_ingest_extra()
+    if not missing:
+        return None
+    return f"needs the ingest extra (missing {', '.join(missing)}): pip install -e '.[ingest]'"
+
+
+class NeedsIngestExtra(pytest.File):
+    """A test module that is not imported (its imports need rosbags): it reports a skip."""
+
+    def collect(self) -> Iterable[pytest.Item]:
+        """Skip, with the reason."""
+        pytest.skip(ingest_missing_reason() or "needs the ingest extra")
+
+
+def skip_modules_without_ingest_extra(
+    module_path: Path, parent: pytest.Collector
+) -> pytest.File | None:
+    """A conftest's `pytest_pycollect_makemodule`: every module of its directory skips without
+    the ingest extra (None: pytest collects the module as usual)."""
+    if ingest_missing_reason() is None:
+        return None
+    return NeedsIngestExtra.from_parent(parent, path=module_path)

@@ -19,9 +19,7 @@ from pbdag_client import Client
 from service.app import create_app
 from service.bootstrap import Container, build_container
 from service.settings import Settings
-from sim import DEMO_SCENARIO
-from sim.scenario import load_scenario
-from sim.stream import simulate, wire_batches
+from tests.eval_extra import require_eval_extra
 
 # 40 frames of the demo room: fixtures confirmed, objects on them, verdicts waited for.
 STREAM_FRAMES = 40
@@ -73,7 +71,13 @@ def open_settings(data_dir: Path) -> Settings:
 
 @pytest.fixture(scope="session")
 def demo_batches() -> list[BatchIn]:
-    """The demo room's stream, two frames a batch, as the robot posts it."""
+    """The demo room's stream, two frames a batch, as the robot posts it (rendered by the
+    simulator: the tests using it skip, saying so, in an install without the eval extra)."""
+    require_eval_extra()
+    from sim import DEMO_SCENARIO
+    from sim.scenario import load_scenario
+    from sim.stream import simulate, wire_batches
+
     run = simulate(load_scenario(DEMO_SCENARIO, frames=STREAM_FRAMES), seed=7)
     return [BatchIn.model_validate(body) for _, body in wire_batches(run, 2)]
 

@@ -14,7 +14,9 @@ from pathlib import Path
 import pytest
 
 from tests.e2e.fault_run import free_port, wait_healthy
-from tests.ingest.recordings import write_bag, write_folder, write_label_map
+from tests.eval_extra import skip_modules_without_ingest_extra as pytest_pycollect_makemodule
+
+__all__ = ["pytest_pycollect_makemodule"]
 
 FRAMES = 20
 REPO = Path(__file__).resolve().parents[2]
@@ -90,6 +92,8 @@ class Recordings:
 @pytest.fixture(scope="session")
 def recordings(real_kitchen: Path, tmp_path_factory: pytest.TempPathFactory) -> Recordings:
     """The recordings, written once from the first 20 real frames."""
+    from tests.ingest.recordings import write_bag, write_folder, write_label_map  # rosbags
+
     root = tmp_path_factory.mktemp("recordings")
     return Recordings(
         folder=write_folder(real_kitchen, root / "kitchen", FRAMES),

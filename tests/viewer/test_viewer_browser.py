@@ -30,7 +30,11 @@ from playwright.sync_api import (
 
 from tests.core.rendered import TABLE_VIEWS
 from tests.e2e.fault_run import free_port, wait_healthy
-from tests.e2e.fixture_world import DISCOVERY, ROOM, wire_batches
+from tests.eval_extra import require_eval_extra
+
+require_eval_extra()  # the scene is rendered by the simulator's detector
+
+from tests.e2e.fixture_world import DISCOVERY, ROOM, wire_batches  # noqa: E402
 
 pytestmark = pytest.mark.slow
 
