@@ -40,12 +40,14 @@ vendor:  ## refetch the vendored Swagger UI assets from the npm registry (pinned
 	bash scripts/vendor-assets.sh
 
 bench: setup  ## the performance benchmarks (figures printed and written to bench/results/)
+	$(BIN)/pip install --quiet -e '.[bench]'
 	$(BIN)/python -m bench.bench_render
 	$(BIN)/python -m bench.bench_decide
 	$(BIN)/python -m bench.bench_plan
 	$(BIN)/python -m bench.bench_rollout
 	$(BIN)/python -m bench.bench_store append --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
+	$(BIN)/python -m bench.bench_store versus --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_memory
 
 soak: setup  ## the long fault run: 40 SIGKILLs, a PostgreSQL restart, a poison batch (about 4 minutes)

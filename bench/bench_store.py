@@ -2,9 +2,15 @@
 
     python -m bench.bench_store append [--events 50000] [--batch 500] [--postgres URL]
     python -m bench.bench_store as-of  [--events 1000000] [--queries 50] [--postgres URL]
+    python -m bench.bench_store versus [--rounds 5] [--postgres URL]
 
 SQLite (a temporary file) always; PostgreSQL too when --postgres is given (a fresh schema,
 dropped afterwards). Figures are printed and written to bench/results/store-*.json.
+
+`versus` compares our log append (the expected-head update and the event rows, in one write
+transaction, as the worker appends) with the application recorder of the `eventsourcing`
+library (the `bench` extra: `pip install -e '.[bench]'`), interleaved round by round on the
+same events (about 1 kB of JSON each) in batches of 1, 20 and 500.
 """
 
 from __future__ import annotations
@@ -16,19 +22,22 @@ import sys
 import tempfile
 import time
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import orjson
 import sqlalchemy as sa
 from tqdm import tqdm
 
 from bench.perf_common import synthetic_events, write_results
+from core.events import Event
 from core.evolve import fold
 from core.params import Params
-from service.store.engine import make_engine, migrate, write_transaction
+from service.store.engine import is_sqlite, make_engine, migrate, write_transaction
 from service.store.event_log import EventLog, SceneRecord, snapshot_due
 
 
@@ -155,6 +164,152 @@ def bench_as_of(args: argparse.Namespace) -> None:
     write_results("store-as-of", results)
 
 
+VERSUS_BATCHES = (1, 20, 500)
+VERSUS_EVENTS = {1: 300, 20: 3000, 500: 15000}  # events per measurement, by batch size
+
+
+class OurAppender:
+    """Our log append: the expected-head update and the event rows in one write transaction."""
+
+    name = "ours"
+
+    def __init__(self, engine: sa.Engine) -> None:
+        self.log = EventLog(engine)
+        self.scene_id = new_scene(self.log).id
+        self.head = 0
+
+    def append(self, chunk: Sequence[Event]) -> None:
+        with write_transaction(self.log.engine) as connection:
+            self.log.append(connection, self.scene_id, self.head, chunk)
+        self.head += len(chunk)
+
+    def close(self) -> None:
+        """Nothing to release (the engine belongs to the caller)."""
+
+
+class TheirAppender:
+    """`eventsourcing`'s application recorder, one aggregate, the same JSON as its state."""
+
+    name = "eventsourcing"
+
+    def __init__(self, engine: sa.Engine, folder: Path) -> None:
+        from eventsourcing.persistence import ApplicationRecorder
+        from eventsourcing.postgres import PostgresApplicationRecorder, PostgresDatastore
+        from eventsourcing.sqlite import SQLiteApplicationRecorder, SQLiteDatastore
+
+        self.datastore: SQLiteDatastore | PostgresDatastore
+        self.recorder: ApplicationRecorder
+        if is_sqlite(engine):
+            self.datastore = SQLiteDatastore(str(folder / "eventsourcing.db"))
+            self.recorder = SQLiteApplicationRecorder(self.datastore)
+        else:
+            url = engine.url
+            with engine.connect() as connection:
+                schema = str(connection.execute(sa.text("select current_schema()")).scalar())
+            self.datastore = PostgresDatastore(
+                dbname=url.database or "postgres",
+                host=url.host or "127.0.0.1",
+                port=url.port or 5432,
+                user=url.username or "postgres",
+                password=url.password or "",
+                schema=schema,
+            )
+            self.recorder = PostgresApplicationRecorder(self.datastore)
+        self.recorder.create_table()
+        self.originator = uuid.uuid4()
+        self.version = 0
+
+    def append(self, chunk: Sequence[Event]) -> None:
+        from eventsourcing.persistence import StoredEvent
+
+        self.recorder.insert_events(
+            [
+                StoredEvent(
+                    originator_id=self.originator,
+                    originator_version=self.version + 1 + offset,
+                    topic=event.type,
+                    state=orjson.dumps(event.details()),
+                )
+                for offset, event in enumerate(chunk)
+            ]
+        )
+        self.version += len(chunk)
+
+    def close(self) -> None:
+        """Close the recorder's connection pool."""
+        self.datastore.close()
+
+
+def appended_per_second(
+    appender: OurAppender | TheirAppender, stream: list[Event], batch: int
+) -> float:
+    """Events per second appending `stream` in batches of `batch`, one transaction per batch."""
+    chunks = [stream[start : start + batch] for start in range(0, len(stream), batch)]
+    started = time.perf_counter()
+    for chunk in chunks:
+        appender.append(chunk)
+    return len(stream) / (time.perf_counter() - started)
+
+
+def bench_versus(args: argparse.Namespace) -> None:
+    """Ours against eventsourcing's recorder, interleaved round by round, per backend and batch."""
+    stream = list(synthetic_events(max(VERSUS_EVENTS.values())))
+    sizes = [len(orjson.dumps(event.details())) for event in stream]
+    results: dict[str, Any] = {
+        "rounds": args.rounds,
+        "events_per_measurement": VERSUS_EVENTS,
+        "event_json_bytes_mean": statistics.fmean(sizes),
+        "peer": "eventsourcing " + version("eventsourcing"),
+    }
+    print(f"events of {statistics.fmean(sizes):,.0f} bytes of JSON on average")
+    with engines(args.postgres) as built, tempfile.TemporaryDirectory() as folder:
+        for name, engine in built:
+            pair: list[OurAppender | TheirAppender] = [
+                OurAppender(engine),
+                TheirAppender(engine, Path(folder)),
+            ]
+            samples: dict[str, dict[int, list[float]]] = {
+                a.name: {b: [] for b in VERSUS_BATCHES} for a in pair
+            }
+            try:
+                for batch in VERSUS_BATCHES:  # warm-up, not counted
+                    for appender in pair:
+                        appended_per_second(appender, stream[: VERSUS_EVENTS[batch] // 10], batch)
+                for round_index in range(args.rounds):
+                    for batch in VERSUS_BATCHES:
+                        order = pair if round_index % 2 == 0 else pair[::-1]
+                        for appender in order:
+                            events = stream[: VERSUS_EVENTS[batch]]
+                            samples[appender.name][batch].append(
+                                appended_per_second(appender, events, batch)
+                            )
+            finally:
+                for appender in pair:
+                    appender.close()
+            results[name] = {
+                str(batch): {
+                    "ours_events_per_s": statistics.median(samples["ours"][batch]),
+                    "eventsourcing_events_per_s": statistics.median(
+                        samples["eventsourcing"][batch]
+                    ),
+                    "ratio": statistics.median(samples["ours"][batch])
+                    / statistics.median(samples["eventsourcing"][batch]),
+                    "samples": {key: samples[key][batch] for key in samples},
+                }
+                for batch in VERSUS_BATCHES
+            }
+    print(f"\nevents appended per second, median of {args.rounds} interleaved rounds")
+    print(f"{'backend':<10}{'batch':>6}{'ours':>10}{'eventsourcing':>15}{'ours/theirs':>13}")
+    for name, _ in built:
+        for batch in VERSUS_BATCHES:
+            row = results[name][str(batch)]
+            print(
+                f"{name:<10}{batch:>6}{row['ours_events_per_s']:>10,.0f}"
+                f"{row['eventsourcing_events_per_s']:>15,.0f}{row['ratio']:>13.2f}"
+            )
+    write_results("store-versus", results)
+
+
 def database_bytes(engine: sa.Engine) -> int | None:
     """Size of the database (SQLite file or PostgreSQL schema tables)."""
     with engine.connect() as connection:
@@ -189,8 +344,11 @@ def main(argv: list[str] | None = None) -> None:
     as_of.add_argument("--snapshot-interval", type=int, default=1000)
     as_of.add_argument("--queries", type=int, default=50)
     as_of.add_argument("--postgres", help="also measure on this PostgreSQL URL")
+    versus = commands.add_parser("versus")
+    versus.add_argument("--rounds", type=int, default=5)
+    versus.add_argument("--postgres", help="also measure on this PostgreSQL URL")
     args = parser.parse_args(argv)
-    {"append": bench_append, "as-of": bench_as_of}[args.command](args)
+    {"append": bench_append, "as-of": bench_as_of, "versus": bench_versus}[args.command](args)
 
 
 if __name__ == "__main__":
