@@ -125,16 +125,43 @@ def event_to_record(event: Event) -> dict[str, Any]:
 
 def non_finite_field(value: Any, path: str = "details") -> str | None:
     """The path of the first NaN or infinite number in a JSON-able value, or None."""
+    if _surely_finite(value):  # the common case, without building a path per number
+        return None
+    return _first_non_finite(value, path)
+
+
+def _surely_finite(value: Any) -> bool:
+    """True only when `value` holds no NaN or infinity; False may also mean "look closer".
+
+    A list of numbers is summed in one C loop: any NaN or infinity makes the sum non-finite
+    (a finite sum that overflows only sends the caller to the exact walk).
+    """
+    kind = type(value)
+    if kind is float:
+        return math.isfinite(value)
+    if kind is str or kind is int or kind is bool or value is None:
+        return True
+    if kind is dict:
+        return all(_surely_finite(item) for item in value.values())
+    if kind is list or kind is tuple:
+        try:
+            return math.isfinite(sum(value))
+        except (TypeError, OverflowError):  # not only numbers, or an int too large for a float
+            return all(_surely_finite(item) for item in value)
+    return False
+
+
+def _first_non_finite(value: Any, path: str) -> str | None:
     if isinstance(value, float):
         return None if math.isfinite(value) else path
     if isinstance(value, Mapping):
         for key, item in value.items():
-            found = non_finite_field(item, f"{path}.{key}")
+            found = _first_non_finite(item, f"{path}.{key}")
             if found is not None:
                 return found
     elif isinstance(value, list | tuple):
         for index, item in enumerate(value):
-            found = non_finite_field(item, f"{path}[{index}]")
+            found = _first_non_finite(item, f"{path}[{index}]")
             if found is not None:
                 return found
     return None

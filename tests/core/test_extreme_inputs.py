@@ -100,3 +100,54 @@ def test_extreme_finite_inputs_make_only_finite_replayable_events(data: st.DataO
     stored = [orjson.loads(orjson.dumps(event_to_record(event))) for event in log]
     replayed = fold(SceneState(), (event_from_record(record) for record in stored))
     assert replayed.to_dict() == state.to_dict()
+
+
+def _reference_non_finite(value: object, path: str = "details") -> str | None:
+    """The first NaN or infinity, found by walking every number (what non_finite_field must say)."""
+    if isinstance(value, float):
+        return None if np.isfinite(value) else path
+    if isinstance(value, dict):
+        for key, item in value.items():
+            found = _reference_non_finite(item, f"{path}.{key}")
+            if found is not None:
+                return found
+    if isinstance(value, list | tuple):
+        for index, item in enumerate(value):
+            found = _reference_non_finite(item, f"{path}[{index}]")
+            if found is not None:
+                return found
+    return None
+
+
+JSON_LEAVES = st.one_of(
+    st.floats(),  # NaN and both infinities included
+    st.sampled_from([1e308, -1e308, float("nan"), float("inf"), 0.0]),  # sums that overflow
+    st.integers(-(10**400), 10**400),  # ints too large for a float
+    st.booleans(),
+    st.none(),
+    st.text(max_size=3),
+)
+JSON_VALUES = st.recursive(
+    JSON_LEAVES,
+    lambda children: st.one_of(
+        st.lists(children, max_size=6),
+        st.lists(children, max_size=6).map(tuple),
+        st.dictionaries(st.text(max_size=3), children, max_size=4),
+    ),
+    max_leaves=30,
+)
+
+
+@given(JSON_VALUES)
+def test_non_finite_field_names_the_first_non_finite_number_as_a_full_walk_does(
+    value: object,
+) -> None:
+    assert non_finite_field(value) == _reference_non_finite(value)
+
+
+def test_non_finite_field_sees_through_a_finite_sum_that_overflows_and_numpy_floats() -> None:
+    assert non_finite_field({"a": [1e308, 1e308]}) is None
+    assert non_finite_field({"a": [1e308, 1e308, float("nan")]}) == "details.a[2]"
+    assert non_finite_field({"a": [1.0, float("inf"), -float("inf")]}) == "details.a[1]"
+    assert non_finite_field({"a": [{"b": np.float64("nan")}]}) == "details.a[0].b"
+    assert non_finite_field({"a": [10**400, 1.5]}) is None
