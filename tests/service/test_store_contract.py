@@ -15,7 +15,7 @@ from core.state import SceneState
 from service.bootstrap import Container
 from service.commands import create_scene, run_command
 from service.settings import Settings
-from service.store.engine import make_engine
+from service.store.engine import make_engine, write_transaction
 from service.store.errors import (
     BatchConflict,
     ConcurrencyConflict,
@@ -23,7 +23,7 @@ from service.store.errors import (
     SceneNotFound,
     SeqOutOfRange,
 )
-from service.store.event_log import SceneRecord
+from service.store.event_log import ONE_STATEMENT_MAX, SceneRecord
 from service.store.projection import rebuild_scene
 from service.store.queue import (
     Admission,
@@ -121,6 +121,57 @@ def test_append_is_gapless_and_conflicts_on_a_stale_head(container: Container) -
         work.append(scene.id, stale, [missed("trk-000002", 0.3, 1)])
     assert container.log.scene(scene.id).head_seq == 3
     assert [e.seq for e in container.log.read(scene.id)] == [0, 1, 2, 3]
+
+
+@pytest.mark.parametrize("size", [1, ONE_STATEMENT_MAX, ONE_STATEMENT_MAX + 1, 200])
+def test_every_batch_size_stores_the_same_rows_and_conflicts_on_a_stale_head(
+    container: Container, size: int
+) -> None:
+    scene = new_scene(container)
+    batch: list[Event] = [added(f"trk-{i:06d}", float(i)) for i in range(1, size + 1)]
+    batch[0] = missed("trk-000001", 0.25, 0)  # a row with no observation, in the same batch
+    clock = container.log.clock
+    with write_transaction(container.engine) as connection:
+        assert container.log.append(connection, scene.id, 0, batch, "b-1") == (1, size)
+    with (
+        pytest.raises(ConcurrencyConflict),
+        write_transaction(container.engine) as connection,
+    ):
+        container.log.append(connection, scene.id, 0, batch, "b-2")
+    stored = container.log.read(scene.id)
+    assert [row.seq for row in stored] == list(range(size + 1))
+    assert container.log.scene(scene.id).head_seq == size
+    for row, event in zip(stored[1:], batch, strict=True):
+        assert (row.type, row.track_id, row.state, row.frame_id, row.batch_id) == (
+            event.type,
+            event.track_id,
+            event.state,
+            event.frame_id,
+            "b-1",
+        )
+        assert row.details == event.details()
+        assert row.to_core() == event
+        assert abs(row.recorded_at - clock()) < 60
+
+
+def test_two_writers_at_one_head_one_waits_then_conflicts(container: Container) -> None:
+    scene = new_scene(container)
+    log = container.log
+    with write_transaction(container.engine) as first:
+        assert log.append(first, scene.id, 0, [added("trk-000001")]) == (1, 1)
+
+        def second() -> tuple[int, int] | None:
+            with write_transaction(container.engine) as connection:
+                return log.append(connection, scene.id, 0, [added("trk-000002")])
+
+        with ThreadPoolExecutor(1) as pool:
+            waiting = pool.submit(second)  # blocks on the first writer until it commits
+            with pytest.raises(TimeoutError):
+                waiting.result(timeout=0.5)
+            first.commit()
+            with pytest.raises(ConcurrencyConflict):
+                waiting.result(timeout=30)
+    assert [row.track_id for row in log.read(scene.id)] == [None, "trk-000001"]
 
 
 def test_rollback_leaves_no_gap_and_no_rows(container: Container) -> None:
