@@ -35,6 +35,13 @@ from service.store.tables import events, scenes, snapshots
 
 READ_PAGE = 5000
 
+# The conditional head update, built once (the append is the hot path).
+HEAD_UPDATE = (
+    sa.update(scenes)
+    .where(scenes.c.id == sa.bindparam("scene_id"), scenes.c.head_seq == sa.bindparam("expected"))
+    .values(head_seq=scenes.c.head_seq + sa.bindparam("count", type_=sa.BigInteger))
+)
+
 # The append on PostgreSQL: the conditional head update and the insert of the rows (arrays of
 # the columns, unnested in order) in one statement. When the head is not the expected one the
 # update matches nothing and no row is inserted; the updated scene row stays locked until commit,
@@ -315,9 +322,7 @@ class EventLog:
                 raise ConcurrencyConflict(f"scene {scene_id!r}: head is not {expected_head}")
             return expected_head + 1, expected_head + count
         result = connection.execute(
-            sa.update(scenes)
-            .where(scenes.c.id == scene_id, scenes.c.head_seq == expected_head)
-            .values(head_seq=scenes.c.head_seq + count)
+            HEAD_UPDATE, {"scene_id": scene_id, "expected": expected_head, "count": count}
         )
         if result.rowcount != 1:
             raise ConcurrencyConflict(f"scene {scene_id!r}: head is not {expected_head}")
