@@ -24,7 +24,7 @@ import time
 import uuid
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from importlib.metadata import version
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 from typing import Any
 
@@ -253,13 +253,18 @@ def appended_per_second(
 
 def bench_versus(args: argparse.Namespace) -> None:
     """Ours against eventsourcing's recorder, interleaved round by round, per backend and batch."""
+    try:
+        peer = "eventsourcing " + version("eventsourcing")
+        version("psycopg-pool")
+    except PackageNotFoundError:
+        sys.exit("bench_store versus needs the bench extra: pip install -e '.[bench]'")
     stream = list(synthetic_events(max(VERSUS_EVENTS.values())))
     sizes = [len(orjson.dumps(event.details())) for event in stream]
     results: dict[str, Any] = {
         "rounds": args.rounds,
         "events_per_measurement": VERSUS_EVENTS,
         "event_json_bytes_mean": statistics.fmean(sizes),
-        "peer": "eventsourcing " + version("eventsourcing"),
+        "peer": peer,
     }
     print(f"events of {statistics.fmean(sizes):,.0f} bytes of JSON on average")
     with engines(args.postgres) as built, tempfile.TemporaryDirectory() as folder:
