@@ -602,6 +602,30 @@ def sustained(figures: Figures) -> bool:
     )
 
 
+def cpu_bound(rows: dict[str, Figures]) -> dict[str, Any]:
+    """What the CPU seconds per batch allow on this machine's cores, even if nothing else ran:
+    one worker uses at most one core; API and workers together at most all of them (PostgreSQL's
+    own share is not counted, so these are upper bounds)."""
+    measured = [rows[key] for key in ("b", "c", "d") if key in rows and rows[key].done]
+    if not measured:
+        return {}
+    worker = sum(
+        v for f in measured for k, v in f.cpu_seconds.items() if k.startswith("worker")
+    ) / sum(f.done for f in measured)
+    api = sum(f.cpu_seconds.get("api", 0.0) for f in measured) / sum(f.done for f in measured)
+    cores = os.cpu_count() or 1
+    one = min(1.0 / worker, cores / (worker + api))
+    two = min(2.0 / worker, cores / (worker + api))
+    return {
+        "worker_cpu_ms_per_batch": round(1e3 * worker, 1),
+        "api_cpu_ms_per_batch": round(1e3 * api, 1),
+        "cores": cores,
+        "one_worker_max_per_s": round(one, 1),
+        "two_workers_max_per_s": round(two, 1),
+        "two_worker_ratio_max": round(two / one, 2),
+    }
+
+
 def verdicts(rows: dict[str, Figures], rate: float, ramp: Sequence[float] = ()) -> dict[str, Any]:
     """The issue's goals against what was measured."""
     found: dict[str, Any] = {}
@@ -634,6 +658,9 @@ def verdicts(rows: dict[str, Figures], rate: float, ramp: Sequence[float] = ()) 
             "one_worker_saturated": rows["d"].throughput < 0.95 * rows["d"].offered,
             "met": ratio >= GOAL_SCALING,
         }
+    bound = cpu_bound(rows)
+    if bound:
+        found["cpu_bound"] = bound
     if "d" in rows:
         d = rows["d"]
         found["one_worker_capacity_per_s"] = {
