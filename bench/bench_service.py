@@ -229,7 +229,7 @@ def wait_answers(
 @contextmanager
 def postgres_schema(url: str) -> Iterator[str]:
     """A fresh schema on the server, dropped afterwards: the service's URL into it."""
-    schema = f"pbdag_bench_{uuid.uuid4().hex[:8]}"
+    schema = f"pbdag_service_bench_{uuid.uuid4().hex[:8]}"
     admin = sa.create_engine(url)
     with admin.begin() as connection:
         connection.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
