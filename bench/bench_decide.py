@@ -25,8 +25,8 @@ from sim.world import Box, World, object_on
 LABELS = ("mug", "book", "bowl", "bottle", "remote", "cup", "plate", "phone", "box", "can")
 
 
-def twenty_objects_frame(seed: int) -> tuple[World, Frame]:
-    """A long table carrying 20 objects, all in view, rendered and detected."""
+def table_with_twenty_objects() -> tuple[Box, tuple[Box, ...]]:
+    """A long table (a fixture) and the 20 small objects on it, in two rows of ten."""
     table = Box("table", "table", (4.0, 3.0, 0.375), (2.4, 1.0, 0.75), kind="fixture")
     objects = tuple(
         object_on(
@@ -38,6 +38,12 @@ def twenty_objects_frame(seed: int) -> tuple[World, Frame]:
         )
         for i in range(20)
     )
+    return table, objects
+
+
+def twenty_objects_frame(seed: int) -> tuple[World, Frame]:
+    """A long table carrying 20 objects, all in view, rendered and detected."""
+    table, objects = table_with_twenty_objects()
     world = World(room_size=(8.0, 6.0, 2.6), fixtures=(table,), objects=objects)
     camera = CameraModel()
     pose = look_at((4.0, 1.2, 1.6), (4.0, 3.0, 0.75))

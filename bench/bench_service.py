@@ -49,16 +49,16 @@ import httpx
 import numpy as np
 import sqlalchemy as sa
 
+from bench.bench_decide import table_with_twenty_objects
 from bench.perf_common import write_results
 from sim.camera import CameraModel, look_at
 from sim.detector import detect, detect_fixtures
 from sim.render import add_kinect_noise, render
 from sim.wire import make_batch, make_frame
-from sim.world import Box, World, object_on
+from sim.world import Box, World
 
 PBDAG = [sys.executable, "-m", "service.cli"]
 REPO = Path(__file__).resolve().parents[1]
-LABELS = ("mug", "book", "bowl", "bottle", "remote", "cup", "plate", "phone", "box", "can")
 GOAL_RATE = 30.0  # frames per second of one robot
 GOAL_P99_MS = 200.0
 GOAL_SCALING = 1.8
@@ -73,19 +73,9 @@ POSTING_THREADS = 128  # concurrent POSTs; beyond, a send waits (its lag is repo
 
 def bench_world() -> World:
     """A long table carrying 20 objects, with a counter and a shelf beside it (all fixtures)."""
-    table = Box("table", "table", (4.0, 3.0, 0.375), (2.4, 1.0, 0.75), kind="fixture")
+    table, objects = table_with_twenty_objects()
     counter = Box("counter", "counter", (3.0, 4.1, 0.45), (1.2, 0.5, 0.9), kind="fixture")
     shelf = Box("shelf", "shelf", (5.0, 4.2, 0.6), (1.0, 0.4, 1.2), kind="fixture")
-    objects = tuple(
-        object_on(
-            table,
-            f"obj{i}",
-            LABELS[i % len(LABELS)],
-            (0.1, 0.1, 0.12),
-            at=(-1.0 + 0.21 * (i % 10), -0.25 + 0.5 * (i // 10)),
-        )
-        for i in range(20)
-    )
     return World(room_size=(8.0, 6.0, 2.6), fixtures=(table, counter, shelf), objects=objects)
 
 
