@@ -28,209 +28,33 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import signal
-import socket
 import statistics
-import subprocess
 import sys
 import tempfile
 import threading
 import time
 import uuid
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass, field
+from contextlib import ExitStack
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import httpx
-import numpy as np
-import sqlalchemy as sa
 
-from bench.bench_decide import table_with_twenty_objects
 from bench.perf_common import write_results
-from sim.camera import CameraModel, look_at
-from sim.detector import detect, detect_fixtures
-from sim.render import add_kinect_noise, render
-from sim.wire import make_batch, make_frame
-from sim.world import Box, World
+from bench.service_fleet import Fleet, free_port, machine_busy_seconds, postgres_schema
+from bench.service_load import BodyTemplate, render_templates, stage_breakdown
+from bench.service_report import (
+    GOAL_RATE,
+    Figures,
+    percentile,
+    table,
+    verdicts,
+)
 
-PBDAG = [sys.executable, "-m", "service.cli"]
-REPO = Path(__file__).resolve().parents[1]
-GOAL_RATE = 30.0  # frames per second of one robot
-GOAL_P99_MS = 200.0
-GOAL_SCALING = 1.8
-# Placeholders in the pre-rendered bodies, replaced by each batch's own id and timestamp.
-BATCH_MARK, FRAME_MARK, TIME_MARK = "@@BATCH@@", "@@FRAME@@", 987654321.25
-CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 POSTING_THREADS = 128  # concurrent POSTs; beyond, a send waits (its lag is reported)
-
-
-# --- the load: pre-rendered bodies ---------------------------------------------------------
-
-
-def bench_world() -> World:
-    """A long table carrying 20 objects, with a counter and a shelf beside it (all fixtures)."""
-    table, objects = table_with_twenty_objects()
-    counter = Box("counter", "counter", (3.0, 4.1, 0.45), (1.2, 0.5, 0.9), kind="fixture")
-    shelf = Box("shelf", "shelf", (5.0, 4.2, 0.6), (1.0, 0.4, 1.2), kind="fixture")
-    return World(room_size=(8.0, 6.0, 2.6), fixtures=(table, counter, shelf), objects=objects)
-
-
-@dataclass(frozen=True)
-class BodyTemplate:
-    """A rendered one-frame batch as JSON bytes, split around its batch id, frame id and time."""
-
-    parts: tuple[bytes, ...]
-    keys: tuple[str, ...]  # what goes between consecutive parts: "batch", "frame" or "time"
-    objects: int
-    fixtures: int
-
-    def body(self, batch_id: str, timestamp: float) -> bytes:
-        quoted = json.dumps(batch_id).encode()
-        values = {"batch": quoted, "frame": quoted, "time": repr(float(timestamp)).encode()}
-        pieces = [self.parts[0]]
-        for key, part in zip(self.keys, self.parts[1:], strict=True):
-            pieces += [values[key], part]
-        return b"".join(pieces)
-
-
-def split_template(text: str) -> tuple[tuple[bytes, ...], tuple[str, ...]]:
-    """Split serialized JSON at its placeholders (the ids with their quotes)."""
-    marks = {json.dumps(BATCH_MARK): "batch", json.dumps(FRAME_MARK): "frame"}
-    marks[repr(TIME_MARK)] = "time"
-    pattern = "|".join(re.escape(mark) for mark in marks)
-    parts: list[bytes] = []
-    keys: list[str] = []
-    position = 0
-    for match in re.finditer(pattern, text):
-        parts.append(text[position : match.start()].encode())
-        keys.append(marks[match.group(0)])
-        position = match.end()
-    parts.append(text[position:].encode())
-    if sorted(keys) != ["batch", "frame", "time"]:
-        raise ValueError(f"placeholders found: {keys}")
-    return tuple(parts), tuple(keys)
-
-
-def render_templates(count: int, seed: int = 0) -> list[BodyTemplate]:
-    """`count` consecutive views of the table (the camera sways 20 cm side to side)."""
-    world = bench_world()
-    camera = CameraModel()
-    rng = np.random.default_rng(seed)
-    templates = []
-    for index in range(count):
-        sway = 0.1 * np.sin(2 * np.pi * index / count)
-        pose = look_at((4.0 + sway, 1.2, 1.6), (4.0 + sway, 3.0, 0.75))
-        view = render(world, camera, pose)
-        fixtures = detect_fixtures(view, world, rng, min_visible_pixels=400)
-        objects = detect(
-            view, world, rng, min_visible_pixels=50, boundary_leak_px=1, embedding_noise=0.05
-        )
-        depth = add_kinect_noise(view.depth, rng).astype(np.float32)
-        frame = make_frame(FRAME_MARK, TIME_MARK, camera, pose, depth, [*fixtures, *objects])
-        text = json.dumps(make_batch(BATCH_MARK, [frame]), separators=(",", ":"))
-        parts, keys = split_template(text)
-        templates.append(BodyTemplate(parts, keys, len(objects), len(fixtures)))
-    return templates
-
-
-# --- processes -----------------------------------------------------------------------------
-
-
-def free_port() -> int:
-    """A free TCP port on loopback."""
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-def cpu_seconds(pid: int) -> float:
-    """User + system CPU seconds of a live process (from /proc/<pid>/stat)."""
-    try:
-        text = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return float("nan")
-    fields = text[text.rindex(")") + 2 :].split()
-    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS  # utime, stime
-
-
-def machine_busy_seconds() -> tuple[float, float]:
-    """(busy, total) CPU seconds of the whole machine since boot, over all cores (/proc/stat)."""
-    values = [int(v) for v in Path("/proc/stat").read_text().split("\n")[0].split()[1:]]
-    idle = values[3] + values[4]  # idle, iowait
-    return (sum(values) - idle) / CLOCK_TICKS, sum(values) / CLOCK_TICKS
-
-
-class Fleet:
-    """The service's processes of one configuration, stopped on exit (also on errors)."""
-
-    def __init__(self, env: dict[str, str], log: Path) -> None:
-        self.env, self.log = env, log
-        self.processes: dict[str, subprocess.Popen[bytes]] = {}
-        self.metrics_urls: dict[str, str] = {}
-
-    def start(self, name: str, arguments: Sequence[str], metrics_url: str) -> None:
-        with self.log.open("ab") as handle:
-            self.processes[name] = subprocess.Popen(
-                [*PBDAG, *arguments],
-                env=self.env,
-                cwd=REPO,
-                stdout=handle,
-                stderr=subprocess.STDOUT,
-                start_new_session=True,  # Ctrl-C reaches the benchmark, which stops them in order
-            )
-        self.metrics_urls[name] = metrics_url
-        wait_answers(metrics_url, self.processes[name], self.log)
-
-    def cpu(self) -> dict[str, float]:
-        return {name: cpu_seconds(process.pid) for name, process in self.processes.items()}
-
-    def stop(self) -> None:
-        for process in self.processes.values():
-            if process.poll() is None:
-                process.send_signal(signal.SIGTERM)
-        for process in self.processes.values():
-            try:
-                process.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
-
-
-def wait_answers(
-    url: str, process: subprocess.Popen[bytes], log: Path, timeout: float = 60
-) -> None:
-    """Poll `url` until it answers 200; fail at once if the process died."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if process.poll() is not None:
-            raise RuntimeError(f"process exited with {process.returncode}; see {log}")
-        try:
-            if httpx.get(url, timeout=1.0).status_code == 200:
-                return
-        except httpx.TransportError:
-            pass
-        time.sleep(0.1)
-    raise RuntimeError(f"{url} did not answer within {timeout} s; see {log}")
-
-
-@contextmanager
-def postgres_schema(url: str) -> Iterator[str]:
-    """A fresh schema on the server, dropped afterwards: the service's URL into it."""
-    schema = f"pbdag_service_bench_{uuid.uuid4().hex[:8]}"
-    admin = sa.create_engine(url)
-    with admin.begin() as connection:
-        connection.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
-    try:
-        separator = "&" if "?" in url else "?"
-        yield f"{url}{separator}options=-csearch_path%3D{schema}"
-    finally:
-        with admin.begin() as connection:
-            connection.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
-        admin.dispose()
 
 
 # --- one configuration ---------------------------------------------------------------------
@@ -269,44 +93,6 @@ class Sent:
     finished_at: float | None = None  # the service's time.time()
     state: str = ""
     error: str = ""
-
-
-@dataclass
-class Figures:
-    """What one configuration measured."""
-
-    config: str
-    title: str
-    rate_per_scene: float
-    scenes: int
-    workers: int
-    seconds: float
-    batches: int = 0
-    accepted: int = 0
-    done: int = 0
-    send_lag_p99_ms: float = 0.0
-    throughput: float = 0.0
-    post_p50_ms: float = 0.0
-    post_p99_ms: float = 0.0
-    done_p50_ms: float = 0.0
-    done_p99_ms: float = 0.0
-    done_max_ms: float = 0.0
-    backlog_at_end: int = 0
-    drain_seconds: float = 0.0
-    decide_mean_ms: float | None = None
-    append_mean_ms: float | None = None
-    cpu_seconds: dict[str, float] = field(default_factory=dict)
-    machine_busy_cores: float = 0.0
-    load_generator_cpu_seconds: float = 0.0
-    errors: list[str] = field(default_factory=list)
-
-    @property
-    def offered(self) -> float:
-        return self.rate_per_scene * self.scenes
-
-
-def percentile(values: Sequence[float], q: float) -> float:
-    return float(np.percentile(np.asarray(values), q)) if values else float("nan")
 
 
 def scrape(url: str) -> dict[str, float]:
@@ -519,157 +305,7 @@ def collect(
         )
 
 
-# --- where a batch's time goes, in one process --------------------------------------------
-
-
-def stage_breakdown(templates: Sequence[BodyTemplate], count: int) -> dict[str, float]:
-    """Median milliseconds of each CPU stage of one batch, in this process on one thread (no
-    HTTP, no database): what the API does (parse, validate and decode, canonical JSON and its
-    hash) and what the worker does (parse and decode again, decide, fold into the state)."""
-    import hashlib
-
-    from api_schema import BatchIn
-    from core.decide import decide
-    from core.evolve import fold
-    from core.state import SceneState
-    from service.codec import canonical_json, decode_batch
-
-    stages: dict[str, list[float]] = {
-        "parse_validate": [],
-        "decode": [],
-        "canonical_json_sha256": [],
-        "decide": [],
-        "fold": [],
-    }
-    state = SceneState()
-    for index in range(count):
-        body = templates[index % len(templates)].body(f"profile-{index}", index / GOAL_RATE)
-        t0 = time.perf_counter()
-        wire = BatchIn.model_validate_json(body)
-        t1 = time.perf_counter()
-        batch = decode_batch(wire)
-        t2 = time.perf_counter()
-        hashlib.sha256(canonical_json(wire.model_dump(mode="json"))).hexdigest()
-        t3 = time.perf_counter()
-        events = decide(state, batch)
-        t4 = time.perf_counter()
-        state = fold(state, events)
-        t5 = time.perf_counter()
-        for name, seconds in zip(
-            stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4), strict=True
-        ):
-            stages[name].append(seconds * 1e3)
-    # The first batches create the tracks; the steady state is what a long run sees.
-    return {name: round(statistics.median(v[count // 2 :]), 1) for name, v in stages.items()}
-
-
 # --- the run -------------------------------------------------------------------------------
-
-
-def table(rows: Sequence[Figures]) -> str:
-    """The figures of every configuration, one line each."""
-    header = (
-        f"{'':6} {'offered/s':>9} {'done/s':>7} {'done':>9} {'POST p50/p99 ms':>16} "
-        f"{'done p50/p99 ms':>16} {'backlog':>7} {'decide ms':>9} {'append ms':>9} "
-        f"{'worker CPU s':>12} {'API CPU s':>9} {'machine cores':>13}"
-    )
-    lines = [header]
-    for f in rows:
-        worker_cpu = sum(v for k, v in f.cpu_seconds.items() if k.startswith("worker"))
-        lines.append(
-            f"{f.config:6} {f.offered:9.1f} {f.throughput:7.1f} {f'{f.done}/{f.batches}':>9} "
-            f"{f'{f.post_p50_ms:.0f}/{f.post_p99_ms:.0f}':>16} "
-            f"{f'{f.done_p50_ms:.0f}/{f.done_p99_ms:.0f}':>16} {f.backlog_at_end:7d} "
-            f"{f.decide_mean_ms or float('nan'):9.1f} {f.append_mean_ms or float('nan'):9.1f} "
-            f"{worker_cpu if f.workers else float('nan'):12.1f} "
-            f"{f.cpu_seconds.get('api', float('nan')):9.1f} {f.machine_busy_cores:13.2f}"
-        )
-    return "\n".join(lines)
-
-
-def sustained(figures: Figures) -> bool:
-    """The worker kept up: every batch done, throughput near the offered rate, and at most one
-    second of load still queued when the load stopped."""
-    return (
-        figures.done == figures.batches
-        and figures.throughput >= 0.95 * figures.offered
-        and figures.backlog_at_end <= max(2.0, figures.offered)
-    )
-
-
-def cpu_bound(rows: dict[str, Figures]) -> dict[str, Any]:
-    """What the CPU seconds per batch allow on this machine's cores, even if nothing else ran:
-    one worker uses at most one core; API and workers together at most all of them (PostgreSQL's
-    own share is not counted, so these are upper bounds)."""
-    measured = [rows[key] for key in ("b", "c", "d") if key in rows and rows[key].done]
-    if not measured:
-        return {}
-    worker = sum(
-        v for f in measured for k, v in f.cpu_seconds.items() if k.startswith("worker")
-    ) / sum(f.done for f in measured)
-    api = sum(f.cpu_seconds.get("api", 0.0) for f in measured) / sum(f.done for f in measured)
-    cores = os.cpu_count() or 1
-    one = min(1.0 / worker, cores / (worker + api))
-    two = min(2.0 / worker, cores / (worker + api))
-    return {
-        "worker_cpu_ms_per_batch": round(1e3 * worker, 1),
-        "api_cpu_ms_per_batch": round(1e3 * api, 1),
-        "cores": cores,
-        "one_worker_max_per_s": round(one, 1),
-        "two_workers_max_per_s": round(two, 1),
-        "two_worker_ratio_max": round(two / one, 2),
-        # One worker also waits (PostgreSQL, the claim, the idle poll), so it does less than
-        # its CPU bound; against what it did, two workers could gain more.
-        "two_workers_max_over_measured_one": round(two / rows["d"].throughput, 2)
-        if "d" in rows and rows["d"].throughput
-        else None,
-    }
-
-
-def verdicts(rows: dict[str, Figures], rate: float, ramp: Sequence[float] = ()) -> dict[str, Any]:
-    """The issue's goals against what was measured."""
-    found: dict[str, Any] = {}
-    steps = [rows[key] for key in rows if "@" in key]
-    if steps:
-        kept = [f for f in steps if sustained(f)]
-        best = max(kept, key=lambda f: f.offered) if kept else None
-        found["one_worker_sustains_per_s"] = {
-            "rates_tried": list(ramp),
-            "highest_sustained": None if best is None else best.offered,
-            "done_p50_ms": None if best is None else best.done_p50_ms,
-            "done_p99_ms": None if best is None else best.done_p99_ms,
-        }
-    one = rows.get("b") or rows.get("a")
-    if one is not None:
-        keeps_up = sustained(one)
-        found["one_worker_at_rate"] = {
-            "config": one.config,
-            "rate": rate,
-            "goal": f">= {GOAL_RATE:.0f}/s with done p99 < {GOAL_P99_MS:.0f} ms",
-            "keeps_up": keeps_up,
-            "done_p99_ms": one.done_p99_ms,
-            "met": keeps_up and rate >= GOAL_RATE and one.done_p99_ms < GOAL_P99_MS,
-        }
-    if "c" in rows and "d" in rows and rows["d"].throughput:
-        ratio = rows["c"].throughput / rows["d"].throughput
-        found["two_workers_scaling"] = {
-            "goal": f">= {GOAL_SCALING}x one worker (2 scenes each)",
-            "ratio": round(ratio, 2),
-            "one_worker_saturated": rows["d"].throughput < 0.95 * rows["d"].offered,
-            "met": ratio >= GOAL_SCALING,
-        }
-    bound = cpu_bound(rows)
-    if bound:
-        found["cpu_bound"] = bound
-    if "d" in rows:
-        d = rows["d"]
-        found["one_worker_capacity_per_s"] = {
-            "value": d.throughput,
-            "bound": "measured (the worker was saturated)"
-            if d.throughput < 0.95 * d.offered
-            else "at least (the worker kept up with the offered load)",
-        }
-    return found
 
 
 def interrupted(signum: int, _frame: object) -> None:
@@ -716,7 +352,7 @@ def main(argv: list[str] | None = None) -> None:
         f"{time.perf_counter() - started:.1f} s",
         file=sys.stderr,
     )
-    breakdown = stage_breakdown(templates, 10 if args.quick else 40)
+    breakdown = stage_breakdown(templates, 10 if args.quick else 40, GOAL_RATE)
     print(f"one batch's CPU stages in one process, median ms: {breakdown}", file=sys.stderr)
     rows: dict[str, Figures] = {}
     for config in chosen:
