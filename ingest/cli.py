@@ -28,7 +28,8 @@ def missing_ingest_extra() -> list[str]:
 def needs_ingest_extra(
     handler: Callable[[argparse.Namespace], int],
 ) -> Callable[[argparse.Namespace], int]:
-    """The handler, run only when the `ingest` extra is installed; else one line saying so."""
+    """The handler, run only when the `ingest` extra is installed (else one line saying so); an
+    input or service error ends it with one line and status 2."""
 
     def checked(args: argparse.Namespace) -> int:
         missing = missing_ingest_extra()
@@ -39,7 +40,11 @@ def needs_ingest_extra(
                 file=sys.stderr,
             )
             return 2
-        return handler(args)
+        try:
+            return handler(args)
+        except (IngestError, SinkError) as error:
+            print(f"pbdag ingest: error: {error}", file=sys.stderr)
+            return 2
 
     return checked
 
@@ -202,60 +207,52 @@ def _run(args: argparse.Namespace, source: FrameSource) -> int:
 
 def _run_folder(args: argparse.Namespace) -> int:
     """`pbdag ingest folder`."""
-    try:
-        from ingest.folder import FolderSource
+    from ingest.folder import FolderSource
 
-        source = FolderSource(
-            args.path,
-            depth_scale=args.depth_scale,
-            stride=args.stride,
-            limit=args.limit,
-            fps=args.fps,
-        )
-        return _run(args, source)
-    except (IngestError, SinkError) as error:
-        print(f"pbdag ingest: error: {error}", file=sys.stderr)
-        return 2
+    source = FolderSource(
+        args.path,
+        depth_scale=args.depth_scale,
+        stride=args.stride,
+        limit=args.limit,
+        fps=args.fps,
+    )
+    return _run(args, source)
 
 
 def _run_rosbag(args: argparse.Namespace) -> int:
     """`pbdag ingest rosbag`."""
-    try:
-        from ingest.rosbag import OdomPose, RosbagSource, TfPose
-        from ingest.transforms import rigid
+    from ingest.rosbag import OdomPose, RosbagSource, TfPose
+    from ingest.transforms import rigid
 
-        pose: TfPose | OdomPose
-        if args.tf:
-            if not args.map_frame:
-                raise IngestError("--tf needs --map-frame (the world frame, e.g. map)")
-            if args.camera_in_base is not None:
-                raise IngestError("--camera-in-base goes with --odom-topic, not --tf")
-            pose = TfPose(map_frame=args.map_frame, camera_frame=args.camera_frame)
-        else:
-            if args.map_frame:
-                raise IngestError("--map-frame goes with --tf; odometry poses are in its frame")
-            extrinsic = None
-            if args.camera_in_base is not None:
-                values = args.camera_in_base
+    pose: TfPose | OdomPose
+    if args.tf:
+        if not args.map_frame:
+            raise IngestError("--tf needs --map-frame (the world frame, e.g. map)")
+        if args.camera_in_base is not None:
+            raise IngestError("--camera-in-base goes with --odom-topic, not --tf")
+        pose = TfPose(map_frame=args.map_frame, camera_frame=args.camera_frame)
+    else:
+        if args.map_frame:
+            raise IngestError("--map-frame goes with --tf; odometry poses are in its frame")
+        extrinsic = None
+        if args.camera_in_base is not None:
+            values = args.camera_in_base
+            try:
                 extrinsic = rigid(values[:3], values[3:])
-            pose = OdomPose(
-                topic=args.odom_topic, camera_in_base=extrinsic, camera_frame=args.camera_frame
-            )
-        source = RosbagSource(
-            args.bag,
-            depth_topic=args.depth_topic,
-            camera_info_topic=args.camera_info_topic,
-            pose=pose,
-            depth_scale=args.depth_scale,
-            stride=args.stride,
-            limit=args.limit,
-            pose_tolerance=args.pose_tolerance,
-            sync_tolerance=args.sync_tolerance,
+            except ValueError as error:  # a zero quaternion
+                raise IngestError(f"--camera-in-base: {error}") from error
+        pose = OdomPose(
+            topic=args.odom_topic, camera_in_base=extrinsic, camera_frame=args.camera_frame
         )
-        return _run(args, source)
-    except (IngestError, SinkError) as error:
-        print(f"pbdag ingest: error: {error}", file=sys.stderr)
-        return 2
-    except ValueError as error:  # a zero quaternion in --camera-in-base
-        print(f"pbdag ingest: error: {error}", file=sys.stderr)
-        return 2
+    source = RosbagSource(
+        args.bag,
+        depth_topic=args.depth_topic,
+        camera_info_topic=args.camera_info_topic,
+        pose=pose,
+        depth_scale=args.depth_scale,
+        stride=args.stride,
+        limit=args.limit,
+        pose_tolerance=args.pose_tolerance,
+        sync_tolerance=args.sync_tolerance,
+    )
+    return _run(args, source)

@@ -15,7 +15,7 @@ from ingest.frames import (
     IngestError,
     SourceCounts,
     SourceFrame,
-    check_stride_and_limit,
+    check_reading_options,
     frame_window,
 )
 
@@ -69,11 +69,9 @@ class FolderSource:
         limit: int | None = None,
         fps: float = 30.0,
     ) -> None:
-        check_stride_and_limit(stride, limit)
+        check_reading_options(stride, limit, depth_scale)
         if not path.is_dir():
             raise IngestError(f"folder {path} does not exist")
-        if not 0 < depth_scale <= 1:
-            raise IngestError(f"--depth-scale must be in (0, 1] metres per unit, got {depth_scale}")
         self.path = path
         self.name = path.name or "folder"
         self.depth_scale = depth_scale

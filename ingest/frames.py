@@ -105,8 +105,11 @@ def frame_window(position: int, stride: int, limit: int | None) -> tuple[bool, b
     return position % stride == 0, False
 
 
-def check_stride_and_limit(stride: int, limit: int | None) -> None:
-    """Reject a stride below 1 or a negative limit with a clear message."""
+def check_reading_options(stride: int, limit: int | None, depth_scale: float) -> None:
+    """Reject a stride below 1, a negative limit or a depth scale outside (0, 1] metres per unit
+    with a clear message."""
+    if not 0 < depth_scale <= 1:
+        raise IngestError(f"--depth-scale must be in (0, 1] metres per unit, got {depth_scale}")
     if stride < 1:
         raise IngestError(f"--stride must be at least 1, got {stride}")
     if limit is not None and limit < 0:

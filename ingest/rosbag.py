@@ -25,7 +25,7 @@ from ingest.frames import (
     IngestError,
     SourceCounts,
     SourceFrame,
-    check_stride_and_limit,
+    check_reading_options,
     frame_window,
 )
 from ingest.transforms import (
@@ -145,11 +145,9 @@ class RosbagSource:
         pose_tolerance: float = 0.05,
         sync_tolerance: float = 0.02,
     ) -> None:
-        check_stride_and_limit(stride, limit)
+        check_reading_options(stride, limit, depth_scale)
         if not path.exists():
             raise IngestError(f"bag {path} does not exist")
-        if not 0 < depth_scale <= 1:
-            raise IngestError(f"--depth-scale must be in (0, 1] metres per unit, got {depth_scale}")
         self.path = path
         self.name = path.name or "bag"
         self.depth_topic, self.camera_info_topic = depth_topic, camera_info_topic
