@@ -170,7 +170,8 @@ def test_dry_run_changes_nothing_and_gc_removes_exactly_the_expired(
     for kept in ("recent", "queued"):
         assert container.blobs.get(before[kept].blob_key) == blobs_before[kept]
     # Events are kept forever: the collected batch's events still read.
-    assert container.log.read(scene_id, after=before["old"].first_seq - 1)
+    first_seq = before["old"].first_seq
+    assert first_seq is not None and container.log.read(scene_id, after=first_seq - 1)
 
     # Later, everything finished is expired; a batch not yet done never is.
     again = collect(container, 0.0, clock=lambda: 1e9)
@@ -303,13 +304,13 @@ def test_a_missing_blob_parks_the_batch_dead_naming_it(
 )
 def test_retention_durations(text: str, seconds: float) -> None:
     assert parse_duration(text) == seconds
-    assert Settings(raw_retention=text).raw_retention == seconds  # type: ignore[arg-type]
+    assert Settings(raw_retention=text).raw_retention == seconds
 
 
 @pytest.mark.parametrize("text", ["7w", "-1d", "nan", "inf", "d"])
 def test_a_bad_retention_is_refused_naming_the_setting(text: str) -> None:
     with pytest.raises(ValueError, match="raw_retention"):
-        Settings(raw_retention=text)  # type: ignore[arg-type]
+        Settings(raw_retention=text)
 
 
 def test_pbdag_gc_dry_run_then_gc(
