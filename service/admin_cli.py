@@ -107,10 +107,15 @@ def _requeue(args: argparse.Namespace) -> int:
     from service.bootstrap import build_container
 
     container = build_container()
+    dead = [record for record in container.queue.of_scene(args.scene) if record.status == "dead"]
+    collected = [record.batch_id for record in dead if record.blob_collected_at is not None]
+    if not args.batch and collected:
+        print(
+            f"scene {args.scene}: {len(collected)} dead batches cannot be requeued, their raw "
+            "bodies were deleted by `pbdag gc`"
+        )
     batch_ids = args.batch or [
-        record.batch_id
-        for record in container.queue.of_scene(args.scene)
-        if record.status == "dead"
+        record.batch_id for record in dead if record.blob_collected_at is None
     ]
     if not batch_ids:
         print(f"scene {args.scene}: no dead batch")
@@ -186,6 +191,8 @@ def _gc(args: argparse.Namespace) -> int:
         )
         for record in report.kept_referenced[:GC_LISTED]:
             print(f"  {record.scene_id}/{record.batch_id}")
+    for scene_id, reason in report.unreadable_scenes.items():
+        print(f"pbdag gc: scene {scene_id} kept whole, its state cannot be read: {reason}")
     if not args.dry_run:
         print(f"pbdag gc: {report.blobs_deleted} blobs deleted from the blob store")
     return 0

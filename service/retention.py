@@ -31,6 +31,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from core.errors import PbdagError
 from core.graph import pending_verifications
 from core.planner import unresolved_fixtures
 from service.bootstrap import Container
@@ -46,6 +47,8 @@ class GcReport:
     dry_run: bool
     expired: list[BatchRecord] = field(default_factory=list)  # collected (or would be)
     kept_referenced: list[BatchRecord] = field(default_factory=list)
+    # Scenes whose state could not be read (a log needing `pbdag repair`): all their batches kept.
+    unreadable_scenes: dict[str, str] = field(default_factory=dict)
     bytes_freed: int = 0  # the blob bytes of the batches collected
     blobs_deleted: int = 0  # blobs removed from the store (0 on a dry run)
 
@@ -81,11 +84,16 @@ def collect(
     cutoff = clock() - retention_seconds
     report = GcReport(retention_seconds, cutoff, dry_run)
     candidates = container.queue.finished_before(cutoff)
-    referenced: dict[str, set[str]] = {}
+    referenced: dict[str, set[str] | None] = {}  # None: the scene's state cannot be read
     for record in candidates:
         if record.scene_id not in referenced:
-            referenced[record.scene_id] = referenced_batches(container, record.scene_id)
-        if record.batch_id in referenced[record.scene_id]:
+            try:
+                referenced[record.scene_id] = referenced_batches(container, record.scene_id)
+            except PbdagError as error:
+                referenced[record.scene_id] = None
+                report.unreadable_scenes[record.scene_id] = error.detail
+        held = referenced[record.scene_id]
+        if held is None or record.batch_id in held:
             report.kept_referenced.append(record)
         else:
             report.expired.append(record)

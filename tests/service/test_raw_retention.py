@@ -19,6 +19,7 @@ from service.bootstrap import Container, build_container
 from service.cli import main
 from service.codec import canonical_json
 from service.deps import admission
+from service.repair import repair_scene
 from service.retention import collect
 from service.settings import Settings, parse_duration
 from service.store.blobs import BlobNotFound
@@ -27,6 +28,7 @@ from service.store.queue import BatchRecord, RawBatchCollected
 from service.store.raw_batches import decode_raw_batch, raw_batch_format
 from service.worker import Worker
 from tests.clients import local_client
+from tests.service.test_worker_failures import poison_the_log
 from tests.wire_scenes import batch
 
 
@@ -344,3 +346,45 @@ def test_pbdag_gc_dry_run_then_gc(
     assert f"removed the raw bodies of 3 batches, {size} bytes" in out
     assert "3 blobs deleted" in out
     assert all(r.blob_collected_at is not None for r in container.queue.of_scene(scene_id))
+
+
+def test_gc_keeps_an_unreadable_scene_whole_and_after_repair_keeps_what_the_copy_needs(
+    container: Container, client: TestClient, clock: Clock
+) -> None:
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0", 0)
+    Worker(container).drain()
+    poison_the_log(container, scene_id)
+    post(client, scene_id, "b1", 1)  # accepted; it waits, as no state can be read
+    report = collect(container, 0.0, clock=lambda: clock.now + 1)
+    assert report.batches == 0 and list(report.unreadable_scenes) == [scene_id]
+    assert "cannot be read" in report.unreadable_scenes[scene_id]
+
+    repaired = repair_scene(container, scene_id).new_scene_id
+    assert repaired is not None
+    old, new = rows(container, scene_id), rows(container, repaired)
+    assert (old["b1"].status, new["b0"].status, new["b1"].status) == ("dead", "done", "queued")
+    assert old["b1"].blob_key == new["b1"].blob_key  # the copy holds the same blob
+    report = collect(container, 0.0, clock=lambda: clock.now + 1)
+    # b0 in both scenes, and the old scene's dead b1; the queued copy of b1 is not touched.
+    assert sorted((r.scene_id == repaired, r.batch_id) for r in report.expired) == [
+        (False, "b0"),
+        (False, "b1"),
+        (True, "b0"),
+    ]
+    assert report.blobs_deleted == 1  # b0's; b1's blob is still held by its queued copy
+    assert Worker(container).drain() == 1
+    assert rows(container, repaired)["b1"].status == "done"
+
+
+def test_the_batch_status_says_when_its_raw_body_was_collected(
+    container: Container, client: TestClient, clock: Clock
+) -> None:
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0", 0)
+    Worker(container).drain()
+    url = f"/v1/scenes/{scene_id}/batches/b0"
+    assert client.get(url).json()["raw_collected_at"] is None
+    clock.now = 5_000.0
+    collect(container, 0.0, clock=lambda: clock.now)
+    assert client.get(url).json()["raw_collected_at"] == 5_000.0
