@@ -8,6 +8,7 @@ import hashlib
 from pathlib import Path
 from typing import Any
 
+import orjson
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -88,6 +89,18 @@ def test_a_real_batch_round_trips_smaller_and_the_scene_is_in_the_blob() -> None
         hashlib.sha256(decode_raw_batch(stored)).hexdigest()
         == hashlib.sha256(canonical).hexdigest()
     )
+
+
+def test_depth_text_that_is_not_canonical_base64_is_kept_as_text() -> None:
+    """"QR==" decodes to b"A" like "QQ==": storing the bytes would not give the text back."""
+    body = BatchIn.model_validate(batch("b1", 1)).model_dump(mode="json")
+    canonical_depth = body["frames"][0]["depth"]["data"]
+    body["frames"] = [body["frames"][0], {**body["frames"][0], "frame_id": "other"}]
+    body["frames"][1]["depth"] = {**body["frames"][1]["depth"], "data": "QR=="}
+    stored = encode_raw_batch(body, "s")
+    restored = orjson.loads(decode_raw_batch(stored))
+    assert [f["depth"]["data"] for f in restored["frames"]] == [canonical_depth, "QR=="]
+    assert decode_raw_batch(stored) == canonical_json(body)
 
 
 def test_the_json_format_of_older_data_dirs_still_decodes() -> None:
