@@ -92,7 +92,7 @@ def test_a_real_batch_round_trips_smaller_and_the_scene_is_in_the_blob() -> None
 
 
 def test_depth_text_that_is_not_canonical_base64_is_kept_as_text() -> None:
-    """"QR==" decodes to b"A" like "QQ==": storing the bytes would not give the text back."""
+    """ "QR==" decodes to b"A" like "QQ==": storing the bytes would not give the text back."""
     body = BatchIn.model_validate(batch("b1", 1)).model_dump(mode="json")
     canonical_depth = body["frames"][0]["depth"]["data"]
     body["frames"] = [body["frames"][0], {**body["frames"][0], "frame_id": "other"}]
