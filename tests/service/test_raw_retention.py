@@ -4,7 +4,9 @@ idempotent re-posts, what gc keeps, what it removes, and what reads a collected 
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Iterator
+import threading
+import time
+from collections.abc import Callable, Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -59,8 +61,8 @@ def new_scene(client: TestClient, name: str = "retention") -> str:
     return str(client.post("/v1/scenes", json={"name": name}).json()["id"])
 
 
-def post(client: TestClient, scene_id: str, batch_id: str, index: int) -> int:
-    response = client.post(f"/v1/scenes/{scene_id}/batches", json=batch(batch_id, index))
+def post(client: TestClient, scene_id: str, batch_id: str, index: int, *, mug: bool = True) -> int:
+    response = client.post(f"/v1/scenes/{scene_id}/batches", json=batch(batch_id, index, mug=mug))
     return int(response.status_code)
 
 
@@ -388,3 +390,51 @@ def test_the_batch_status_says_when_its_raw_body_was_collected(
     clock.now = 5_000.0
     collect(container, 0.0, clock=lambda: clock.now)
     assert client.get(url).json()["raw_collected_at"] == 5_000.0
+
+
+def test_gc_running_beside_posts_and_a_worker_never_takes_a_needed_blob(
+    container: Container, client: TestClient
+) -> None:
+    """gc with a retention of zero, in a loop, while batches are posted and worked on: every
+    batch is done (none found its blob gone), and in the end every raw body is collected."""
+    container.queue.clock = time.time
+    stop = threading.Event()
+    failures: list[BaseException] = []
+
+    def run(step: Callable[[], object]) -> None:
+        try:
+            while not stop.is_set():
+                step()
+        except BaseException as error:  # reported by the test thread
+            failures.append(error)
+
+    worker = Worker(container)
+    threads = [
+        threading.Thread(target=run, args=(worker.run_once,)),
+        threading.Thread(target=run, args=(lambda: collect(container, 0.0),)),
+    ]
+    scene_id = new_scene(client)
+    for thread in threads:
+        thread.start()
+    try:
+        for i in range(30):
+            assert post(client, scene_id, f"b{i}", i, mug=i % 3 != 2) == 202
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and any(
+            r.status != "done" for r in container.queue.of_scene(scene_id)
+        ):
+            time.sleep(0.05)
+    finally:
+        stop.set()
+        for thread in threads:
+            thread.join(timeout=30)
+    assert failures == []
+    final = collect(container, 0.0)
+    records = container.queue.of_scene(scene_id)
+    assert [r.status for r in records] == ["done"] * 30
+    # No fixture in this scene, so nothing is referenced: every raw body is collected.
+    assert final.kept_referenced == []
+    assert all(r.blob_collected_at is not None for r in records)
+    for record in records:
+        with pytest.raises(BlobNotFound):
+            container.blobs.get(record.blob_key)
