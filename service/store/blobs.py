@@ -8,12 +8,30 @@ import tempfile
 from pathlib import Path
 from typing import Protocol
 
+from core.errors import PbdagError
+
+
+class BlobNotFound(KeyError):
+    """No blob is stored under the key (never written, or deleted by `pbdag gc`)."""
+
+
+class RawBatchMissing(PbdagError):
+    """A batch's raw body is not in the blob store, though nothing collected it."""
+
+    def __init__(self, batch_id: str, key: str) -> None:
+        super().__init__(f"batch {batch_id!r}: its raw body (blob {key}) is missing", "batch_id")
+
 
 class BlobStore(Protocol):
-    """Put bytes, get them back by their sha256."""
+    """Put bytes, get them back by their sha256, delete them.
+
+    `get` of a missing key raises `BlobNotFound`. `delete` is idempotent: it returns whether a
+    blob was there. `pbdag gc` deletes through this protocol only.
+    """
 
     def put(self, content: bytes) -> str: ...
     def get(self, key: str) -> bytes: ...
+    def delete(self, key: str) -> bool: ...
 
 
 class FileBlobStore:
@@ -52,8 +70,25 @@ class FileBlobStore:
         return key
 
     def get(self, key: str) -> bytes:
-        """The bytes stored under `key`."""
-        return self._path(key).read_bytes()
+        """The bytes stored under `key`; BlobNotFound when there are none."""
+        try:
+            return self._path(key).read_bytes()
+        except FileNotFoundError:
+            raise BlobNotFound(key) from None
+
+    def delete(self, key: str) -> bool:
+        """Remove the blob (the rename of `put` makes this atomic); False when it was absent."""
+        path = self._path(key)
+        try:
+            path.unlink()
+        except FileNotFoundError:
+            return False
+        directory = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(directory)
+        finally:
+            os.close(directory)
+        return True
 
 
 class MemoryBlobStore:
@@ -69,5 +104,12 @@ class MemoryBlobStore:
         return key
 
     def get(self, key: str) -> bytes:
-        """The bytes stored under `key`."""
-        return self._blobs[key]
+        """The bytes stored under `key`; BlobNotFound when there are none."""
+        try:
+            return self._blobs[key]
+        except KeyError:
+            raise BlobNotFound(key) from None
+
+    def delete(self, key: str) -> bool:
+        """Remove the blob; False when it was absent."""
+        return self._blobs.pop(key, None) is not None
