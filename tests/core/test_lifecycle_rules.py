@@ -326,3 +326,44 @@ def test_an_append_only_memory_never_removes() -> None:
         state = fold(state, decide(state, scene_batch(f"m{i}", EMPTY), rules=rules))
     track = state.tracks["trk-000001"]
     assert track.lifecycle == "confirmed" and track.visible_misses == 15
+
+
+def test_an_object_seen_at_its_new_place_first_hands_over_to_its_old_identity() -> None:
+    state, _ = run(SceneState(), timed([scene_batch(f"b{i}", MUG) for i in range(3)], 0))
+    # Carried away: seen at its new place while its old place is hidden, it is a new track.
+    hide = [((0.2, 0.1, 1.2), 0.5)]
+    state, _ = run(state, timed([scene_batch(f"f{i}", FAR, occluders=hide) for i in range(2)], 3))
+    assert [state.tracks[t].lifecycle for t in sorted(state.tracks)] == ["confirmed"] * 2
+    # Its old place seen empty in two batches establishes the absence: the second batch's
+    # sighting goes to the old identity, and the younger track is removed and retired.
+    state, per_batch = run(state, timed([scene_batch(f"g{i}", FAR) for i in range(3)], 5))
+    assert types(per_batch[0]) == ["update", "update"]  # trk-1 missed, trk-2 seen
+    handed = [(e.track_id, e.type) for e in per_batch[1]]
+    assert handed == [("trk-000001", "update"), ("trk-000002", "remove"), ("trk-000002", "retire")]
+    assert per_batch[1][2].details()["to"] == "trk-000001"
+    assert types(per_batch[2]) == ["update", "move"]
+    old, young = state.tracks["trk-000001"], state.tracks["trk-000002"]
+    assert old.lifecycle == "confirmed" and math.dist(old.center, (-0.6, 0.1, 1.43)) < 0.05
+    assert young.lifecycle == "retired"
+
+
+def test_no_hand_over_to_an_identity_still_in_place_or_last_seen_after_the_younger_appeared() -> (
+    None
+):
+    state, _ = run(SceneState(), timed([scene_batch(f"b{i}", MUG) for i in range(3)], 0))
+    both = {**MUG, "mug_2": FAR["mug_1"]}
+    # A second mug seen beside the first: the first is in place, nothing is handed over.
+    state, per_batch = run(state, timed([scene_batch(f"s{i}", both) for i in range(4)], 3))
+    assert {e.type for events in per_batch for e in events} == {"add", "update", "confirm"}
+    assert [state.tracks[t].lifecycle for t in sorted(state.tracks)] == ["confirmed"] * 2
+    # The first is taken away now: it was last seen after the second appeared, so the second
+    # keeps its own identity and the first is removed in time.
+    state, per_batch = run(state, timed([scene_batch(f"g{i}", FAR) for i in range(12)], 7))
+    flat = [(e.track_id, e.type) for events in per_batch for e in events]
+    assert ("trk-000002", "retire") not in flat and ("trk-000001", "remove") in flat
+    assert state.tracks["trk-000002"].lifecycle == "confirmed"
+
+
+def timed(batches: list[Batch], start: int) -> list[Batch]:
+    """The batches stamped one second apart from `start` seconds."""
+    return [at_time(batch, float(start + k)) for k, batch in enumerate(batches)]
