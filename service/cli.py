@@ -15,7 +15,7 @@ from pathlib import Path
 from service.admin_cli import register as register_admin_commands
 from service.auth_cli import register as register_token_commands
 from service.logs import configure_logging
-from service.settings import Settings
+from service.settings import Settings, SettingsError
 
 OPENAPI_PATH = Path(__file__).resolve().parents[1] / "api_schema" / "openapi.json"
 
@@ -73,15 +73,19 @@ def main(argv: list[str] | None = None) -> int:
         except Exception as error:  # a broken plugin must not take the service's commands down
             print(f"pbdag: command {entry_point.name!r} unavailable: {error}", file=sys.stderr)
     args = parser.parse_args(argv)
-    if hasattr(args, "handler"):
-        return int(args.handler(args))
     handlers = {
         "serve": _serve,
         "worker": _worker,
         "migrate": _migrate,
         "openapi": _openapi,
     }
-    return handlers[args.command](args)
+    try:
+        if hasattr(args, "handler"):
+            return int(args.handler(args))
+        return handlers[args.command](args)
+    except SettingsError as error:  # settings that cannot work together: say which, start nothing
+        print(f"pbdag: {error}", file=sys.stderr)
+        return 2
 
 
 def env_name(field: str) -> str:

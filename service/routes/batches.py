@@ -35,12 +35,9 @@ def post_batch(
     # The blob is the canonical JSON, so its key is the content hash used for idempotency.
     content = canonical_json(batch.model_dump(mode="json"))
     content_sha256 = hashlib.sha256(content).hexdigest()
-    bounds = admission(settings)
-    if container.queue.get(scene.id, batch.batch_id) is None:
-        container.queue.admit(scene.id, len(content), bounds)  # 429 / 507 before any write
-    blob_key = container.blobs.put(content)
+    # One transaction: admission (429 / 507 before any write), the blob, the queue row.
     record, created = container.queue.submit(
-        scene.id, batch.batch_id, content_sha256, blob_key, len(batch.frames), len(content), bounds
+        scene.id, batch.batch_id, content_sha256, content, len(batch.frames), admission(settings)
     )
     if not created:
         response.status_code = 200

@@ -1,19 +1,65 @@
-"""Content-addressed blob store for raw batch payloads (depth never goes into the database)."""
+"""Content-addressed blob stores for raw batch payloads: a folder, or a table of PostgreSQL.
+
+A blob's key is the sha256 of its bytes; the bytes are opaque to the store. The queue writes a
+batch's blob inside the transaction that inserts its row (`put(content, connection)`):
+
+- `PgBlobStore` inserts it on that connection, so the blob and the queue row commit or roll back
+  together: a crash never leaves a queued batch without its blob, nor a blob without its batch.
+  Processes on several hosts then share nothing but the database.
+- `FileBlobStore` writes the file durably (fsync, rename) at once, before the row commits: a
+  queued batch always has its blob; a rollback or a crash before the commit may leave a file
+  that no batch names, which `keys()` lists for a garbage collector.
+"""
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import tempfile
+import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Protocol
 
+import sqlalchemy as sa
+from sqlalchemy.dialects import postgresql
+
+from service.store.engine import read_transaction, write_transaction
+from service.store.tables import blobs
+
+_KEY = re.compile(r"^[0-9a-f]{64}$")
+
+
+class BlobMissing(LookupError):
+    """No blob is stored under this key."""
+
 
 class BlobStore(Protocol):
-    """Put bytes, get them back by their sha256."""
+    """Put bytes, get them back by their sha256, delete them, list the keys."""
 
-    def put(self, content: bytes) -> str: ...
-    def get(self, key: str) -> bytes: ...
+    def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
+        """Store `content` (idempotent) and return its key. With `connection`, the blob is
+        durable once that connection's transaction commits (the enqueue's); without, on return."""
+        ...
+
+    def get(self, key: str) -> bytes:
+        """The bytes stored under `key`; BlobMissing (FileNotFoundError for a folder) if none."""
+        ...
+
+    def delete(self, key: str) -> bool:
+        """Remove the blob; False when there was none. The caller decides that no batch still
+        needs it."""
+        ...
+
+    def keys(self) -> Iterator[str]:
+        """Every stored key, in no particular order."""
+        ...
+
+
+def blob_key(content: bytes) -> str:
+    """The key of `content`: its sha256 in hex."""
+    return hashlib.sha256(content).hexdigest()
 
 
 class FileBlobStore:
@@ -26,9 +72,10 @@ class FileBlobStore:
     def _path(self, key: str) -> Path:
         return self.root / key[:2] / key[2:4] / key
 
-    def put(self, content: bytes) -> str:
-        """Store `content` (idempotent) and return its key."""
-        key = hashlib.sha256(content).hexdigest()
+    def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
+        """Store `content` (idempotent) and return its key; durable on return, whatever the
+        transaction of `connection` does later."""
+        key = blob_key(content)
         path = self._path(key)
         if path.exists():
             return key
@@ -55,6 +102,72 @@ class FileBlobStore:
         """The bytes stored under `key`."""
         return self._path(key).read_bytes()
 
+    def delete(self, key: str) -> bool:
+        """Remove the blob's file; False when there was none."""
+        try:
+            self._path(key).unlink()
+        except FileNotFoundError:
+            return False
+        return True
+
+    def keys(self) -> Iterator[str]:
+        """Every complete blob (a crash's `.incoming-*` leftovers are not blobs)."""
+        for path in self.root.glob("??/??/*"):
+            if _KEY.match(path.name) and path.is_file():
+                yield path.name
+
+
+class PgBlobStore:
+    """Blobs in the `blobs` table of the service's PostgreSQL database (bytea, stored out of
+    line without compression: the bytes are opaque and may already be compressed)."""
+
+    def __init__(self, engine: sa.Engine) -> None:
+        if engine.dialect.name != "postgresql":
+            raise ValueError(f"PgBlobStore needs PostgreSQL, not {engine.dialect.name}")
+        self.engine = engine
+
+    def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
+        """Insert the blob on `connection` (it commits with that transaction), or in a
+        transaction of its own. A blob already stored is not rewritten but row-locked until the
+        transaction ends: a collector that locks a blob (`SELECT ... FOR UPDATE`) before checking
+        that no batch names it then sees the batch this transaction queues."""
+        key = blob_key(content)
+        insert = postgresql.insert(blobs).values(
+            key=key, content=content, size=len(content), created_at=time.time()
+        )
+        statement = insert.on_conflict_do_update(
+            index_elements=[blobs.c.key], set_={"key": insert.excluded.key}
+        )
+        if connection is not None:
+            connection.execute(statement)
+        else:
+            with write_transaction(self.engine) as own:
+                own.execute(statement)
+        return key
+
+    def get(self, key: str) -> bytes:
+        """The bytes stored under `key`; BlobMissing when none."""
+        with read_transaction(self.engine) as connection:
+            content = connection.execute(
+                sa.select(blobs.c.content).where(blobs.c.key == key)
+            ).scalar()
+        if content is None:
+            raise BlobMissing(f"no blob {key} in the database")
+        return bytes(content)
+
+    def delete(self, key: str) -> bool:
+        """Remove the blob's row; False when there was none."""
+        with write_transaction(self.engine) as connection:
+            deleted = connection.execute(sa.delete(blobs).where(blobs.c.key == key)).rowcount
+        return bool(deleted)
+
+    def keys(self) -> Iterator[str]:
+        """Every stored key, streamed (a server-side cursor)."""
+        with self.engine.connect() as connection:
+            result = connection.execution_options(yield_per=1000).execute(sa.select(blobs.c.key))
+            for key in result.scalars():
+                yield str(key)
+
 
 class MemoryBlobStore:
     """In-memory blobs for tests."""
@@ -62,12 +175,23 @@ class MemoryBlobStore:
     def __init__(self) -> None:
         self._blobs: dict[str, bytes] = {}
 
-    def put(self, content: bytes) -> str:
+    def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
         """Store `content` and return its key."""
-        key = hashlib.sha256(content).hexdigest()
+        key = blob_key(content)
         self._blobs[key] = content
         return key
 
     def get(self, key: str) -> bytes:
         """The bytes stored under `key`."""
-        return self._blobs[key]
+        try:
+            return self._blobs[key]
+        except KeyError:
+            raise BlobMissing(f"no blob {key} in memory") from None
+
+    def delete(self, key: str) -> bool:
+        """Forget the blob; False when there was none."""
+        return self._blobs.pop(key, None) is not None
+
+    def keys(self) -> Iterator[str]:
+        """Every stored key."""
+        yield from list(self._blobs)

@@ -15,6 +15,7 @@ from typing import Any
 import sqlalchemy as sa
 
 from core.errors import PbdagError
+from service.store.blobs import BlobStore
 from service.store.engine import read_transaction, write_transaction
 from service.store.errors import BatchConflict, LeaseLost, StoreError
 from service.store.tables import batches
@@ -108,10 +109,14 @@ def _record(row: sa.Row[Any]) -> BatchRecord:
 
 
 class BatchQueue:
-    """The job queue on one engine; `clock` is injectable so tests can expire leases."""
+    """The job queue on one engine, with the blob store of the raw batches; `clock` is
+    injectable so tests can expire leases."""
 
-    def __init__(self, engine: sa.Engine, clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self, engine: sa.Engine, blobs: BlobStore, clock: Callable[[], float] = time.time
+    ) -> None:
         self.engine = engine
+        self.blobs = blobs
         self.clock = clock
 
     # -- admission ----------------------------------------------------------------------------
@@ -131,22 +136,17 @@ class BatchQueue:
         if stored + incoming_bytes > bounds.max_blob_bytes:
             raise QuotaExceeded(int(stored), incoming_bytes, bounds.max_blob_bytes)
 
-    def admit(self, scene_id: str, incoming_bytes: int, bounds: Admission) -> None:
-        """The admission check alone, before the blob is written."""
-        with read_transaction(self.engine) as connection:
-            self.check_admission(scene_id, incoming_bytes, bounds, connection)
-
     def submit(
         self,
         scene_id: str,
         batch_id: str,
         content_sha256: str,
-        blob_key: str,
+        blob: bytes,
         frame_count: int,
-        blob_bytes: int,
         bounds: Admission,
     ) -> tuple[BatchRecord, bool]:
-        """Queue a batch; (record, True) when new, the original when re-posted with equal content.
+        """Queue a batch and its blob in one transaction; (record, True) when new, the original
+        when re-posted with equal content (its blob is not written again).
 
         Two posts of one batch racing each other both end here: the loser of the unique
         constraint reads the winner's row (PostgreSQL's reads are not serialized as SQLite's).
@@ -155,7 +155,8 @@ class BatchQueue:
             with write_transaction(self.engine) as connection:
                 existing = self._get(connection, scene_id, batch_id)
                 if existing is None:
-                    self.check_admission(scene_id, blob_bytes, bounds, connection)
+                    self.check_admission(scene_id, len(blob), bounds, connection)
+                    blob_key = self.blobs.put(blob, connection)  # commits with the row
                     connection.execute(
                         batches.insert().values(
                             scene_id=scene_id,
@@ -166,7 +167,7 @@ class BatchQueue:
                             status="queued",
                             attempts=0,
                             received_at=self.clock(),
-                            blob_bytes=blob_bytes,
+                            blob_bytes=len(blob),
                         )
                     )
                     created = self._get(connection, scene_id, batch_id)
@@ -192,6 +193,14 @@ class BatchQueue:
             sa.select(batches).where(batches.c.scene_id == scene_id, batches.c.batch_id == batch_id)
         ).first()
         return None if row is None else _record(row)
+
+    def blob_keys(self) -> list[str]:
+        """The key of every blob a batch names (any status), each once, in key order."""
+        with read_transaction(self.engine) as connection:
+            rows = connection.execute(
+                sa.select(batches.c.blob_key).distinct().order_by(batches.c.blob_key)
+            ).scalars()
+            return [str(key) for key in rows]
 
     def of_scene(self, scene_id: str) -> list[BatchRecord]:
         """Every batch of a scene, in arrival order."""
