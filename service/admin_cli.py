@@ -6,8 +6,13 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from core.errors import PbdagError
+from service.settings import Settings
+
+if TYPE_CHECKING:
+    from service.bootstrap import Container
 
 
 def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -185,30 +190,35 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _blobs_migrate(args: argparse.Namespace) -> int:
-    from service.blob_migration import migrate_blobs
     from service.bootstrap import build_container
-    from service.settings import Settings
-    from service.store.blobs import FileBlobStore, PgBlobStore
     from service.store.engine import is_postgres
 
     settings = Settings()
     container = build_container(settings.model_copy(update={"blob_backend": "folder"}))
-    if not is_postgres(container.engine):
-        print(
-            "pbdag blobs migrate: the database is not PostgreSQL (PBDAG_DATABASE_URL); on "
-            f"{container.engine.dialect.name} blobs can only live in the folder",
-            file=sys.stderr,
-        )
-        return 2
+    try:
+        if not is_postgres(container.engine):
+            print(
+                "pbdag blobs migrate: the database is not PostgreSQL (PBDAG_DATABASE_URL); on "
+                f"{container.engine.dialect.name} blobs can only live in the folder",
+                file=sys.stderr,
+            )
+            return 2
+        return _copy_blobs(container, settings, args.target)
+    finally:
+        container.engine.dispose()
+
+
+def _copy_blobs(container: Container, settings: Settings, to: str) -> int:
+    from service.blob_migration import migrate_blobs
+    from service.store.blobs import FileBlobStore, PgBlobStore
+
     folder = FileBlobStore(settings.data_dir / "blobs")
     table = PgBlobStore(container.engine)
-    source, target = (folder, table) if args.target == "postgres" else (table, folder)
+    source, target = (folder, table) if to == "postgres" else (table, folder)
     where = {"folder": f"the folder {folder.root.resolve()}", "postgres": "the database"}
     keys = container.queue.blob_keys()
-    came_from = "folder" if args.target == "postgres" else "postgres"
-    print(
-        f"blobs migrate: {len(keys)} blobs named by the queue, {where[came_from]} -> {where[args.target]}"
-    )
+    came_from = "folder" if to == "postgres" else "postgres"
+    print(f"blobs migrate: {len(keys)} blobs named by the queue, {where[came_from]} -> {where[to]}")
     report = migrate_blobs(keys, source, target, progress=lambda line: print(line, flush=True))
     print(
         f"blobs migrate: {report.copied} copied ({report.bytes_copied / 1e6:.1f} MB), "
@@ -220,6 +230,6 @@ def _blobs_migrate(args: argparse.Namespace) -> int:
     for key in report.corrupt:
         print(f"  not matching its sha256 in the source: {key}", file=sys.stderr)
     if report.complete:
-        print(f"blobs migrate: done; run the fleet with PBDAG_BLOB_BACKEND={args.target}")
+        print(f"blobs migrate: done; run the fleet with PBDAG_BLOB_BACKEND={to}")
         return 0
     return 1

@@ -198,7 +198,10 @@ def _worker(args: argparse.Namespace) -> int:
         print(f"pbdag worker: metrics on http://127.0.0.1:{settings.metrics_port}/metrics")
     worker = Worker(container)
     if args.drain:
-        processed = worker.drain()
+        try:
+            processed = worker.drain()
+        finally:
+            container.engine.dispose()
         print(f"pbdag worker {worker.name}: processed {processed} batches")
         return 0
     stop = threading.Event()
