@@ -25,7 +25,7 @@ from typing import Protocol
 import sqlalchemy as sa
 from sqlalchemy.dialects import postgresql
 
-from service.store.engine import read_transaction, write_transaction
+from service.store.engine import write_transaction
 from service.store.tables import blobs
 
 _KEY = re.compile(r"^[0-9a-f]{64}$")
@@ -117,6 +117,9 @@ class FileBlobStore:
                 yield path.name
 
 
+GET_SQL = "SELECT content FROM blobs WHERE key = %s"
+
+
 class PgBlobStore:
     """Blobs in the `blobs` table of the service's PostgreSQL database (bytea, stored out of
     line without compression: the bytes are opaque and may already be compressed)."""
@@ -146,14 +149,26 @@ class PgBlobStore:
         return key
 
     def get(self, key: str) -> bytes:
-        """The bytes stored under `key`; BlobMissing when none."""
-        with read_transaction(self.engine) as connection:
-            content = connection.execute(
-                sa.select(blobs.c.content).where(blobs.c.key == key)
-            ).scalar()
-        if content is None:
+        """The bytes stored under `key`; BlobMissing when none.
+
+        Read in psycopg's binary format (a bytea in text format travels as hex: 4x slower for a
+        batch); a driver error is raised as SQLAlchemy's, which the worker knows to retry."""
+        import psycopg
+
+        with self.engine.connect() as connection:
+            driver = connection.connection.driver_connection
+            assert driver is not None
+            try:
+                with driver.cursor(binary=True) as cursor:
+                    cursor.execute(GET_SQL, (key,))
+                    row = cursor.fetchone()
+                driver.rollback()  # end the read-only transaction the query opened
+            except psycopg.Error as error:
+                connection.invalidate()
+                raise sa.exc.DBAPIError.instance(GET_SQL, (key,), error, psycopg.Error) from error
+        if row is None:
             raise BlobMissing(f"no blob {key} in the database")
-        return bytes(content)
+        return bytes(row[0])
 
     def delete(self, key: str) -> bool:
         """Remove the blob's row; False when there was none."""

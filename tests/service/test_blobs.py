@@ -235,3 +235,26 @@ def migrate_there_and_back(
     assert main(["blobs", "migrate", "--to", "folder"]) == 0
     assert "5 copied" in capsys.readouterr().out
     assert sorted(FileBlobStore(tmp_path / "host-c" / "blobs").keys()) == keys
+
+
+@pytest.mark.skipif("postgres" not in store_backends(), reason="needs PostgreSQL")
+def test_a_driver_error_reading_a_postgres_blob_is_sqlalchemys(
+    request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The binary read goes to psycopg directly; its errors reach the worker as SQLAlchemy's
+    (an OperationalError, the database unavailable, is retried there)."""
+    import service.store.blobs
+
+    engine = engine_on_fresh_schema(request)
+    try:
+        migrate(engine)
+        blobs = PgBlobStore(engine)
+        key = blobs.put(b"x" * 5000)
+        assert blobs.get(key) == b"x" * 5000
+        monkeypatch.setattr(service.store.blobs, "GET_SQL", "SELECT content FROM gone WHERE %s")
+        with pytest.raises(sa.exc.ProgrammingError, match="gone"):
+            blobs.get(key)
+        monkeypatch.undo()
+        assert blobs.get(key) == b"x" * 5000  # the pool replaced the invalidated connection
+    finally:
+        engine.dispose()
