@@ -169,7 +169,9 @@ def _serve(args: argparse.Namespace) -> int:
         print(refusal, file=sys.stderr)
         return 2
     print(
-        f"pbdag: database {_redacted(settings.resolved_database_url())}, data in {settings.data_dir.resolve()}"
+        f"pbdag: database {_redacted(settings.resolved_database_url())}, "
+        f"raw batches in {blob_location(container.blobs)} "
+        f"(PBDAG_BLOB_BACKEND={settings.blob_backend})"
     )
     print(
         f"pbdag: API on http://{settings.host}:{settings.port} (docs at /docs, metrics at /metrics)",
@@ -234,6 +236,17 @@ def _openapi(args: argparse.Namespace) -> int:
     args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")
     print(f"wrote {args.out}")
     return 0
+
+
+def blob_location(blobs: object) -> str:
+    """Where a blob store keeps the raw batches, for the startup line."""
+    from service.store.blobs import FileBlobStore, PgBlobStore
+
+    if isinstance(blobs, PgBlobStore):
+        return "the database"
+    if isinstance(blobs, FileBlobStore):
+        return f"the folder {blobs.root.resolve()}"
+    return type(blobs).__name__
 
 
 def _redacted(url: str) -> str:

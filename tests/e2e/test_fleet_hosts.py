@@ -94,6 +94,7 @@ def test_api_and_two_workers_on_three_hosts_share_only_postgres(
                 stored_blobs = connection.execute(sa.text("SELECT count(*) FROM blobs")).scalar()
             assert attempts is not None and attempts >= 2  # the victim's attempt, then another
             assert stored_blobs == BATCHES  # the raw batches are in the database...
+        assert "raw batches in the database (PBDAG_BLOB_BACKEND=auto)" in log.read_text()
         for path in hosts.values():  # ...and no process wrote a blob to its own disk
             assert not (path / "blobs").exists(), sorted(path.rglob("*"))
     finally:
