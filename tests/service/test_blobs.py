@@ -72,6 +72,10 @@ def test_a_blob_is_named_by_its_sha256_and_can_be_listed_and_deleted(
     assert list(blobs.keys()) == [other]
     with pytest.raises((BlobMissing, FileNotFoundError)):
         blobs.get(key)
+    blobs.put(one)
+    for stored in blobs.keys():  # a collector deletes while it lists
+        assert blobs.delete(stored)
+    assert list(blobs.keys()) == []
 
 
 def test_the_folder_lists_complete_blobs_only(tmp_path: Path) -> None:
@@ -158,6 +162,9 @@ def test_postgres_blobs_on_sqlite_stop_the_command_with_a_clear_message(
     error = capsys.readouterr().err
     assert "PBDAG_BLOB_BACKEND=postgres needs a PostgreSQL database" in error
     assert "sqlite" in error and "Traceback" not in error
+    monkeypatch.setenv("PBDAG_BLOB_BACKEND", "auto")
+    assert main(["blobs", "migrate", "--to", "postgres"]) == 2
+    assert "the database is not PostgreSQL" in capsys.readouterr().err
     monkeypatch.setenv("PBDAG_BLOB_BACKEND", "sideways")
     with pytest.raises(ValueError, match="blob_backend"):
         Settings()
