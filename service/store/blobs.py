@@ -1,14 +1,15 @@
 """Content-addressed blob stores for raw batch payloads: a folder, or a table of PostgreSQL.
 
 A blob's key is the sha256 of its bytes; the bytes are opaque to the store. The queue writes a
-batch's blob inside the transaction that inserts its row (`put(content, connection)`):
+batch's blob with its row (`BatchQueue.submit`):
 
-- `PgBlobStore` inserts it on that connection, so the blob and the queue row commit or roll back
-  together: a crash never leaves a queued batch without its blob, nor a blob without its batch.
-  Processes on several hosts then share nothing but the database.
-- `FileBlobStore` writes the file durably (fsync, rename) at once, before the row commits: a
-  queued batch always has its blob; a rollback or a crash before the commit may leave a file
-  that no batch names, which `keys()` lists for a garbage collector.
+- `PgBlobStore` inserts it on the connection of the transaction that inserts the row
+  (`put(content, connection)`), so both commit or roll back together: a crash never leaves a
+  queued batch without its blob, nor a blob without its batch. Processes on several hosts then
+  share nothing but the database.
+- `FileBlobStore` writes the file durably (fsync, rename) before that transaction opens (SQLite's
+  write lock is not held over the fsync): a queued batch always has its blob; a crash before the
+  commit may leave a file that no batch names, which `keys()` lists for a garbage collector.
 """
 
 from __future__ import annotations
@@ -38,6 +39,11 @@ class BlobMissing(LookupError):
 class BlobStore(Protocol):
     """Put bytes, get them back by their sha256, delete them, list the keys."""
 
+    # True when `put(content, connection)` commits with that connection's transaction (the
+    # queue then writes the blob inside the transaction that inserts the batch's row); False
+    # when `put` is durable at once (the queue then writes it before that transaction).
+    joins_transaction: bool
+
     def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
         """Store `content` (idempotent) and return its key. With `connection`, the blob is
         durable once that connection's transaction commits (the enqueue's); without, on return."""
@@ -64,6 +70,8 @@ def blob_key(content: bytes) -> str:
 
 class FileBlobStore:
     """Blobs under a folder, sharded by hash; written durably before the API answers 202."""
+
+    joins_transaction = False
 
     def __init__(self, root: Path) -> None:
         self.root = root
@@ -123,6 +131,8 @@ GET_SQL = "SELECT content FROM blobs WHERE key = %s"
 class PgBlobStore:
     """Blobs in the `blobs` table of the service's PostgreSQL database (bytea, stored out of
     line without compression: the bytes are opaque and may already be compressed)."""
+
+    joins_transaction = True
 
     def __init__(self, engine: sa.Engine) -> None:
         if engine.dialect.name != "postgresql":
@@ -186,6 +196,8 @@ class PgBlobStore:
 
 class MemoryBlobStore:
     """In-memory blobs for tests."""
+
+    joins_transaction = False
 
     def __init__(self) -> None:
         self._blobs: dict[str, bytes] = {}

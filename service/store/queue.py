@@ -145,18 +145,25 @@ class BatchQueue:
         frame_count: int,
         bounds: Admission,
     ) -> tuple[BatchRecord, bool]:
-        """Queue a batch and its blob in one transaction; (record, True) when new, the original
-        when re-posted with equal content (its blob is not written again).
+        """Queue a batch and its blob; (record, True) when new, the original when re-posted
+        with equal content (its blob is not written again).
+
+        A store that joins the transaction (PostgreSQL's table) writes the blob in the one that
+        inserts the row: both commit or neither. A folder writes it durably first, after the
+        admission check, so that SQLite's write lock is not held over the file's fsync; a crash
+        in between leaves an orphan file, never a row without its blob.
 
         Two posts of one batch racing each other both end here: the loser of the unique
         constraint reads the winner's row (PostgreSQL's reads are not serialized as SQLite's).
         """
+        joins = self.blobs.joins_transaction
+        key = None if joins else self._put_first(scene_id, batch_id, blob, bounds)
         try:
             with write_transaction(self.engine) as connection:
                 existing = self._get(connection, scene_id, batch_id)
                 if existing is None:
                     self.check_admission(scene_id, len(blob), bounds, connection)
-                    blob_key = self.blobs.put(blob, connection)  # commits with the row
+                    blob_key = self.blobs.put(blob, connection) if key is None else key
                     connection.execute(
                         batches.insert().values(
                             scene_id=scene_id,
@@ -180,6 +187,17 @@ class BatchQueue:
         if existing.content_sha256 != content_sha256:
             raise BatchConflict(f"batch {batch_id!r} was already posted with different content")
         return existing, False
+
+    def _put_first(
+        self, scene_id: str, batch_id: str, blob: bytes, bounds: Admission
+    ) -> str | None:
+        """A folder's blob, before the row's transaction: written unless the batch is already
+        queued (a re-post) or refused (429 / 507, raised here); its key, or None."""
+        with read_transaction(self.engine) as connection:
+            if self._get(connection, scene_id, batch_id) is not None:
+                return None
+            self.check_admission(scene_id, len(blob), bounds, connection)
+        return self.blobs.put(blob)
 
     # -- reads --------------------------------------------------------------------------------
 

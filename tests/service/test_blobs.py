@@ -73,7 +73,8 @@ def test_a_blob_is_named_by_its_sha256_and_can_be_listed_and_deleted(
     with pytest.raises((BlobMissing, FileNotFoundError)):
         blobs.get(key)
     blobs.put(one)
-    for stored in blobs.keys():  # a collector deletes while it lists
+    listing = blobs.keys()  # a collector deletes while it lists
+    for stored in listing:
         assert blobs.delete(stored)
     assert list(blobs.keys()) == []
 
