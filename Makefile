@@ -48,6 +48,7 @@ bench: setup  ## the performance benchmarks (figures printed and written to benc
 	$(BIN)/python -m bench.bench_store append --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store versus --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
+	$(BIN)/python -m bench.bench_store raw
 	$(BIN)/python -m bench.bench_blobs --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_memory
 	$(BIN)/python -m bench.bench_service --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test --ramp 6,8,10,12

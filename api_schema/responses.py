@@ -50,6 +50,11 @@ class BatchStatus(BaseModel):
     error: str | None = Field(description="Why the last attempt failed.")
     received_at: float
     finished_at: float | None
+    raw_collected_at: float | None = Field(
+        None,
+        description="When `pbdag gc` deleted the batch's raw body (PBDAG_RAW_RETENTION); its "
+        "events stay. Null while it is kept.",
+    )
 
 
 class GraphNode(BaseModel):

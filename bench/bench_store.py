@@ -3,6 +3,7 @@
     python -m bench.bench_store append [--events 50000] [--batch 500] [--postgres URL]
     python -m bench.bench_store as-of  [--events 1000000] [--queries 50] [--postgres URL]
     python -m bench.bench_store versus [--rounds 5] [--postgres URL]
+    python -m bench.bench_store raw    [--frames 40]
 
 SQLite (a temporary file) always; PostgreSQL too when --postgres is given (a fresh schema,
 dropped afterwards). Figures are printed and written to bench/results/store-*.json.
@@ -11,6 +12,12 @@ dropped afterwards). Figures are printed and written to bench/results/store-*.js
 transaction, as the worker appends) with the application recorder of the `eventsourcing`
 library (the `bench` extra: `pip install -e '.[bench]'`), interleaved round by round on the
 same events (about 1 kB of JSON each) in batches of 1, 20 and 500.
+
+`raw` measures how raw batches are kept, on the end-to-end benchmark's realistic 640x480 frames
+(20 object masks plus fixture masks, png16 Kinect-noise depth; bench/service_load.py): bytes
+per frame as canonical JSON with base64 depth (the former blob) and in the compact format
+(binary depth, zstandard), the encode and decode time per frame, and the bytes per event of
+the events the same frames append (decide + fold, steady state).
 """
 
 from __future__ import annotations
@@ -315,6 +322,70 @@ def bench_versus(args: argparse.Namespace) -> None:
     write_results("store-versus", results)
 
 
+def bench_raw(args: argparse.Namespace) -> None:
+    """Bytes per raw frame before and after the compact format, and per event."""
+    from api_schema import BatchIn
+    from bench.service_load import render_templates
+    from core.decide import decide
+    from core.state import SceneState
+    from service.codec import canonical_json, decode_batch
+    from service.store.raw_batches import ZSTD_LEVEL, decode_raw_batch, encode_raw_batch
+
+    templates = render_templates(min(args.frames, 20))
+    before, after, encode_ms, decode_ms, events_per_batch, event_bytes = [], [], [], [], [], []
+    state = SceneState()
+    for index in range(args.frames):
+        raw = templates[index % len(templates)].body(f"raw-{index}", index / 5.0)
+        body = BatchIn.model_validate_json(raw).model_dump(mode="json")
+        canonical = canonical_json(body)
+        t0 = time.perf_counter()
+        stored = encode_raw_batch(body, "scn-bench")
+        t1 = time.perf_counter()
+        assert decode_raw_batch(stored) == canonical
+        t2 = time.perf_counter()
+        before.append(len(canonical))
+        after.append(len(stored))
+        encode_ms.append((t1 - t0) * 1e3)
+        decode_ms.append((t2 - t1) * 1e3)
+        events = decide(state, decode_batch(BatchIn.model_validate_json(canonical)))
+        state = fold(state, events)
+        events_per_batch.append(len(events))
+        event_bytes += [len(orjson.dumps(event.details())) for event in events]
+    steady = events_per_batch[len(events_per_batch) // 2 :]
+    per_event = statistics.fmean(steady)
+    results: dict[str, Any] = {
+        "frames": args.frames,
+        "zstd_level": ZSTD_LEVEL,
+        "json_base64_bytes_per_frame": statistics.fmean(before),
+        "compact_bytes_per_frame": statistics.fmean(after),
+        "compact_max_bytes_per_frame": max(after),
+        "ratio": statistics.fmean(after) / statistics.fmean(before),
+        "encode_ms_median": statistics.median(encode_ms),
+        "decode_ms_median": statistics.median(decode_ms),
+        "events_per_frame_steady": per_event,
+        "compact_raw_bytes_per_event": statistics.fmean(after) / per_event,
+        "json_base64_raw_bytes_per_event": statistics.fmean(before) / per_event,
+        "event_details_bytes_mean": statistics.fmean(event_bytes),
+        "goal_bytes_per_frame": 300_000,
+    }
+    print(
+        f"raw batch per 640x480 frame: {results['json_base64_bytes_per_frame'] / 1e6:.3f} MB as "
+        f"JSON with base64 depth -> {results['compact_bytes_per_frame'] / 1e6:.3f} MB compact "
+        f"(x{results['ratio']:.2f}; max {max(after) / 1e6:.3f} MB; goal 0.300 MB)"
+    )
+    print(
+        f"encode {results['encode_ms_median']:.2f} ms, decode {results['decode_ms_median']:.2f} ms "
+        "per frame (median)"
+    )
+    print(
+        f"{per_event:.1f} events per frame (steady state): raw "
+        f"{results['compact_raw_bytes_per_event'] / 1e3:.1f} kB per event compact "
+        f"({results['json_base64_raw_bytes_per_event'] / 1e3:.1f} kB before); an event's "
+        f"details are {results['event_details_bytes_mean']:.0f} bytes of JSON"
+    )
+    write_results("store-raw", results)
+
+
 def database_bytes(engine: sa.Engine) -> int | None:
     """Size of the database (SQLite file or PostgreSQL schema tables)."""
     with engine.connect() as connection:
@@ -352,8 +423,16 @@ def main(argv: list[str] | None = None) -> None:
     versus = commands.add_parser("versus")
     versus.add_argument("--rounds", type=int, default=5)
     versus.add_argument("--postgres", help="also measure on this PostgreSQL URL")
+    raw = commands.add_parser("raw")
+    raw.add_argument("--frames", type=int, default=40)
     args = parser.parse_args(argv)
-    {"append": bench_append, "as-of": bench_as_of, "versus": bench_versus}[args.command](args)
+    handlers = {
+        "append": bench_append,
+        "as-of": bench_as_of,
+        "versus": bench_versus,
+        "raw": bench_raw,
+    }
+    handlers[args.command](args)
 
 
 if __name__ == "__main__":

@@ -185,8 +185,14 @@ class BatchEvidence:
                 continue
             track_id = arrays.track_ids[row]
             best = self.visibility.get(track_id)
-            if best is None or sighting.better_than(best):
+            if best is None or self._rank(sighting) > self._rank(best):
                 self.visibility[track_id] = sighting.seen_in(frame.frame_id)
+
+    def _rank(self, sighting: Sighting) -> tuple[bool, int, float]:
+        """Which of a batch's sightings of a track stands for the batch: one that would count a
+        miss first, then the one showing more of the box."""
+        gate = observable(sighting, self.params.visibility, self.rules.visibility_gate)
+        return (gate, sighting.passed, sighting.expected_fraction)
 
     def surfaces(self) -> list[SupportSurface]:
         """Fixture tops objects may rest on, with this batch's fixture geometry."""

@@ -6,6 +6,9 @@ and nothing closer in front (d_meas + 0.15 m >= d_expected). We add the missed-d
 condition: the part of the box that was observable must be large enough in the image that the
 detector would have reported the object had it been there. A sliver at the image border, a
 grazing view or a far object is not evidence of absence: detectors do not report those.
+And the empty-place condition: the depth must show the place empty, the ray to the box's centre
+meeting its first surface behind that centre. An object still there but missed by the detector
+shows its own surface in front of its centre: that is the detector's miss, not the object's.
 """
 
 from __future__ import annotations
@@ -31,11 +34,9 @@ class Sighting:
     passed: int  # samples that passed the gate
     expected_fraction: float  # share of the image the observable part of the box covers
     in_image_share: float = 1.0  # share of the box's projected extent inside the image
+    # The depth at the box's centre lies behind it: the place is seen empty (no object there).
+    center_empty: bool = True
     frame_id: str = ""
-
-    def better_than(self, other: Sighting) -> bool:
-        """More of the box observable."""
-        return (self.passed, self.expected_fraction) > (other.passed, other.expected_fraction)
 
     def seen_in(self, frame_id: str) -> Sighting:
         """The same sighting, naming its frame."""
@@ -44,12 +45,14 @@ class Sighting:
 
 def observable(sighting: Sighting, params: VisibilityParams, gate: bool = True) -> bool:
     """V_i(t) = 1: at least two samples pass, and (with the gate) the observable part is
-    large enough to be detected."""
+    large enough to be detected and, unless the paper's gate is asked for, the depth shows the
+    place empty."""
     return sighting.passed >= params.min_samples_passed and (
         not gate
         or (
             sighting.expected_fraction >= params.min_expected_image_fraction
             and sighting.in_image_share >= params.min_in_image_share
+            and (sighting.center_empty or not params.miss_requires_empty_center)
         )
     )
 
@@ -120,10 +123,40 @@ def samples_passed(
         share = np.where(in_image > 0, passed / np.maximum(in_image, 1), 0.0)
         in_image_share = np.where(full_area > 0, area / np.maximum(full_area, 1e-9), 0.0)
     fraction = area * share / (width * height)
+    # The free-space rule is its own test of an empty place; without the occlusion test there
+    # is no depth test at all.
+    if occlusion_test and miss_evidence == "visible":
+        empty = _center_empty(centers, frame, params)
+    else:
+        empty = np.ones(count, dtype=np.bool_)
     return [
-        Sighting(int(p), float(f), float(i))
-        for p, f, i in zip(passed, fraction, in_image_share, strict=True)
+        Sighting(int(p), float(f), float(i), bool(e))
+        for p, f, i, e in zip(passed, fraction, in_image_share, empty, strict=True)
     ]
+
+
+def _center_empty(
+    centers: FloatArray, frame: Frame, params: VisibilityParams
+) -> npt.NDArray[np.bool_]:
+    """Per box: its centre projects into the image, in range, and the first surface along that
+    ray lies at least `empty_center_margin_m` behind it."""
+    points = world_to_camera(centers, frame.pose)
+    expected = points[:, 2]
+    empty = np.zeros(centers.shape[0], dtype=np.bool_)
+    rows = np.flatnonzero((expected >= params.min_range_m) & (expected <= params.max_range_m))
+    if rows.size == 0:
+        return empty
+    u, v = project(points[rows], frame.intrinsics)
+    width, height = frame.intrinsics.width, frame.intrinsics.height
+    inside = (u >= 0) & (u <= width - 1) & (v >= 0) & (v <= height - 1)
+    rows, u, v = rows[inside], u[inside], v[inside]
+    if rows.size == 0:
+        return empty
+    measured = _window_depth(
+        frame.depth, np.rint(u).astype(np.intp), np.rint(v).astype(np.intp), params
+    )
+    empty[rows] = (measured > 0) & (measured >= expected[rows] + params.empty_center_margin_m)
+    return empty
 
 
 def _bbox_area(owner: npt.NDArray[np.intp], u: FloatArray, v: FloatArray, count: int) -> FloatArray:

@@ -1,5 +1,5 @@
-"""Operator commands: `pbdag rebuild`, `pbdag requeue`, `pbdag repair`, `pbdag export`,
-`pbdag blobs migrate`."""
+"""Operator commands: `pbdag rebuild`, `pbdag requeue`, `pbdag repair`, `pbdag gc`,
+`pbdag export`, `pbdag blobs migrate`."""
 
 from __future__ import annotations
 
@@ -13,6 +13,8 @@ from service.settings import Settings
 
 if TYPE_CHECKING:
     from service.bootstrap import Container
+
+GC_LISTED = 20  # batches `pbdag gc` names one per line; the rest are counted
 
 
 def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -39,6 +41,20 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     repair.add_argument("scene", help="the scene to check and, if needed, repair")
     repair.set_defaults(handler=_repair)
+
+    gc = commands.add_parser(
+        "gc",
+        help="delete the raw bodies of batches older than PBDAG_RAW_RETENTION (events stay); "
+        "safe while the service runs",
+    )
+    gc.add_argument(
+        "--dry-run", action="store_true", help="report what would be deleted; change nothing"
+    )
+    gc.add_argument(
+        "--retention",
+        help="override PBDAG_RAW_RETENTION for this run (e.g. 7d, 12h, 3600)",
+    )
+    gc.set_defaults(handler=_gc)
 
     export = commands.add_parser(
         "export",
@@ -111,10 +127,15 @@ def _requeue(args: argparse.Namespace) -> int:
     from service.bootstrap import build_container
 
     container = build_container()
+    dead = [record for record in container.queue.of_scene(args.scene) if record.status == "dead"]
+    collected = [record.batch_id for record in dead if record.blob_collected_at is not None]
+    if not args.batch and collected:
+        print(
+            f"scene {args.scene}: {len(collected)} dead batches cannot be requeued, their raw "
+            "bodies were deleted by `pbdag gc`"
+        )
     batch_ids = args.batch or [
-        record.batch_id
-        for record in container.queue.of_scene(args.scene)
-        if record.status == "dead"
+        record.batch_id for record in dead if record.blob_collected_at is None
     ]
     if not batch_ids:
         print(f"scene {args.scene}: no dead batch")
@@ -154,6 +175,46 @@ def _repair(args: argparse.Namespace) -> int:
             f"  commands after the bad event were not replayed (seqs {report.commands_dropped}); "
             "issue them again on the new scene if still wanted"
         )
+    return 0
+
+
+def _gc(args: argparse.Namespace) -> int:
+    from service.bootstrap import build_container
+    from service.retention import collect
+    from service.settings import parse_duration
+
+    container = build_container()
+    retention = container.settings.raw_retention
+    if args.retention is not None:
+        try:
+            retention = parse_duration(args.retention)
+        except ValueError as error:
+            print(f"pbdag gc: --retention: {error}", file=sys.stderr)
+            return 2
+    if retention is None:
+        print("pbdag gc: PBDAG_RAW_RETENTION is unset, so every raw batch is kept; nothing removed")
+        return 0
+    report = collect(container, retention, dry_run=args.dry_run)
+    verb = "would remove" if args.dry_run else "removed"
+    print(
+        f"pbdag gc: {verb} the raw bodies of {report.batches} batches, {report.bytes_freed} bytes "
+        f"(finished more than {retention:g} s ago; events are kept)"
+    )
+    for record in report.expired[:GC_LISTED]:
+        print(f"  {record.scene_id}/{record.batch_id}: {record.blob_bytes} bytes ({record.status})")
+    if len(report.expired) > GC_LISTED:
+        print(f"  ... and {len(report.expired) - GC_LISTED} more")
+    if report.kept_referenced:
+        print(
+            f"pbdag gc: kept {len(report.kept_referenced)} expired batches holding the frame of "
+            "a pending verification or an unresolved inspection:"
+        )
+        for record in report.kept_referenced[:GC_LISTED]:
+            print(f"  {record.scene_id}/{record.batch_id}")
+    for scene_id, reason in report.unreadable_scenes.items():
+        print(f"pbdag gc: scene {scene_id} kept whole, its state cannot be read: {reason}")
+    if not args.dry_run:
+        print(f"pbdag gc: {report.blobs_deleted} blobs deleted from the blob store")
     return 0
 
 

@@ -13,10 +13,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-from service.store.blobs import BlobMissing, BlobStore
-
-# A blob the source cannot give: missing there (and not intact in the target) or not matching its key.
-UNREADABLE = (BlobMissing, FileNotFoundError)
+from service.store.blobs import BlobNotFound, BlobStore
 
 
 @dataclass
@@ -41,7 +38,7 @@ def intact(store: BlobStore, key: str) -> bool:
     """True when `store` holds the blob `key` and its bytes hash to the key."""
     try:
         content = store.get(key)
-    except UNREADABLE:
+    except BlobNotFound:
         return False
     return hashlib.sha256(content).hexdigest() == key
 
@@ -62,7 +59,7 @@ def migrate_blobs(
         else:
             try:
                 content = source.get(key)
-            except UNREADABLE:
+            except BlobNotFound:
                 report.missing.append(key)
                 content = None
             if content is not None:

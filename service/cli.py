@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     openapi = commands.add_parser("openapi", help="write the OpenAPI document")
     openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
     register_token_commands(commands)  # `pbdag token create|list|revoke`
-    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|export`
+    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|gc|export|blobs`
 
     for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from evaluation
         try:

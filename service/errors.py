@@ -46,7 +46,7 @@ from service.store.errors import (
     StoreError,
     UnreadableEvent,
 )
-from service.store.queue import NotRequeueable, QueueFull, QuotaExceeded
+from service.store.queue import NotRequeueable, QueueFull, QuotaExceeded, RawBatchCollected
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 
@@ -75,6 +75,7 @@ PROBLEMS: dict[type[Exception], Problem] = {
     ConcurrencyConflict: Problem(409, "Conflict", "/problems/conflict"),
     StateConflict: Problem(409, "Conflict", "/problems/state-conflict"),
     NotRequeueable: Problem(409, "Conflict", "/problems/not-requeueable"),
+    RawBatchCollected: Problem(410, "Gone", "/problems/raw-batch-collected"),
     UnreadableEvent: Problem(409, "Scene needs repair", "/problems/scene-needs-repair"),
     SceneQuarantined: Problem(409, "Scene quarantined", "/problems/scene-quarantined"),
     PayloadTooLarge: Problem(413, "Payload Too Large", "/problems/payload-too-large"),

@@ -36,6 +36,7 @@ SCENE = {
 }
 BODY = {413: "The request body is over the limit (PBDAG_MAX_BODY_BYTES)."}
 STORAGE = {507: "The scene's raw batches would exceed its quota (PBDAG_MAX_SCENE_BLOB_BYTES)."}
+GONE = {410: "The batch's raw body was deleted by `pbdag gc` (PBDAG_RAW_RETENTION)."}
 OPEN = {400: COMMON[400], 500: COMMON[500]}
 
 
@@ -50,6 +51,8 @@ def error_statuses(path: str, method: str) -> dict[int, str]:
         statuses |= BODY
     if path.endswith("/batches") and method == "post":
         statuses |= STORAGE
+    if path.endswith("/requeue"):
+        statuses |= GONE
     return statuses
 
 

@@ -5,11 +5,31 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, field_validator
 from pydantic_settings import SettingsConfigDict
 
 from service.codec import InputLimits
 from service.security_settings import SecuritySettings, with_database_password
+
+DURATION_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
+
+
+def parse_duration(text: str) -> float | None:
+    """Seconds of `7d`, `12h`, `90m`, `30s` or `3600`; None for empty or `none`."""
+    value = text.strip().lower()
+    if value in ("", "none"):
+        return None
+    unit = DURATION_UNITS.get(value[-1])
+    number = value[:-1] if unit is not None else value
+    try:
+        seconds = float(number) * (unit or 1.0)
+    except ValueError:
+        raise ValueError(
+            f"{text!r} is not a duration (seconds, or a number with s, m, h or d)"
+        ) from None
+    if not seconds >= 0 or seconds == float("inf"):
+        raise ValueError(f"{text!r}: a duration is a finite number of seconds >= 0")
+    return seconds
 
 
 class SettingsError(ValueError):
@@ -86,6 +106,14 @@ class Settings(SecuritySettings):
     max_scene_blob_bytes: int = Field(
         20 * 1024**3, ge=1, description="Raw batch bytes a scene may store; more are a 507."
     )
+    raw_retention: float | None = Field(
+        None,
+        ge=0,
+        description="How long `pbdag gc` keeps a done or dead batch's raw body after it finished: "
+        "seconds, or a number with s, m, h or d (e.g. 7d); unset keeps every raw batch. "
+        "Events are kept forever; a batch still queued or running, and one holding the frame "
+        "of a pending verification or of an unresolved inspection, is kept.",
+    )
     lease_seconds: float = Field(
         60.0,
         gt=0,
@@ -109,6 +137,14 @@ class Settings(SecuritySettings):
     state_cache_scenes: int = Field(
         64, description="Scene states a worker keeps in memory between batches."
     )
+
+    @field_validator("raw_retention", mode="before")
+    @classmethod
+    def _duration(cls, value: object) -> object:
+        """`7d`, `12h`, `90m`, `30s` or plain seconds; empty or `none` for unset."""
+        if isinstance(value, str):
+            return parse_duration(value)
+        return value
 
     def input_limits(self) -> InputLimits:
         """The decoding limits of one request."""

@@ -43,7 +43,8 @@ def scene_out(record: SceneRecord) -> Scene:
 
 def batch_out(record: BatchRecord) -> BatchStatus:
     """A queue row."""
-    return BatchStatus.model_validate(record, from_attributes=True)
+    status = BatchStatus.model_validate(record, from_attributes=True)
+    return status.model_copy(update={"raw_collected_at": record.blob_collected_at})
 
 
 def event_out(event: StoredEvent) -> EventOut:

@@ -30,8 +30,10 @@ from core.state import SceneState
 from service.bootstrap import Container
 from service.codec import decode_batch
 from service.logs import log_context
+from service.store.blobs import BlobNotFound, RawBatchMissing
 from service.store.errors import ConcurrencyConflict, LeaseLost
-from service.store.queue import Claim
+from service.store.queue import Claim, RawBatchCollected
+from service.store.raw_batches import decode_raw_batch
 
 logger = logging.getLogger("pbdag.worker")
 
@@ -112,7 +114,7 @@ class Worker:
         try:
             with self._renewing(claim):
                 with metrics.timed(metrics.decide_seconds):
-                    body = container.blobs.get(claim.blob_key)
+                    body = decode_raw_batch(self._raw_body(claim))
                     batch = decode_batch(
                         BatchIn.model_validate_json(body), container.settings.input_limits()
                     )
@@ -139,6 +141,16 @@ class Worker:
             "" if appended.seqs is None else f", seq {appended.seqs[0]}..{appended.seqs[1]}",
         )
         self._remember(claim.scene_id, appended.state)
+
+    def _raw_body(self, claim: Claim) -> bytes:
+        """The stored batch; RawBatchCollected when `pbdag gc` deleted it (a copy made by
+        `pbdag repair` of a collected batch), RawBatchMissing when it is gone otherwise."""
+        if claim.blob_collected_at is not None:
+            raise RawBatchCollected(claim.batch_id, claim.blob_collected_at)
+        try:
+            return self.container.blobs.get(claim.blob_key)
+        except BlobNotFound:
+            raise RawBatchMissing(claim.batch_id, claim.blob_key) from None
 
     def _failed(self, claim: Claim, error: BaseException) -> None:
         message, transient = short_error(error)

@@ -13,6 +13,7 @@ from core.errors import NotFound
 from service.auth import RequireAdmin
 from service.codec import canonical_json, decode_batch
 from service.deps import ContainerDep, SceneDep, admission
+from service.store.raw_batches import encode_raw_batch
 from service.wire import batch_out
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}/batches", tags=["batches"])
@@ -32,12 +33,16 @@ def post_batch(
     """Validate and durably queue a batch (202); the same batch_id and content again returns the original (200)."""
     settings = container.settings
     decode_batch(batch, settings.input_limits())  # 422 naming the field; nothing is stored
-    # The blob is the canonical JSON, so its key is the content hash used for idempotency.
-    content = canonical_json(batch.model_dump(mode="json"))
-    content_sha256 = hashlib.sha256(content).hexdigest()
-    # One transaction: admission (429 / 507 before any write), the blob, the queue row.
+    # Idempotency is over the canonical JSON; the blob keeps it compactly (binary depth, zstd).
+    body = batch.model_dump(mode="json")
+    content_sha256 = hashlib.sha256(canonical_json(body)).hexdigest()
+    # A re-post writes no blob (its raw body may have been collected by `pbdag gc`): submit
+    # answers with the original, or 409 for different content.
+    known = container.queue.get(scene.id, batch.batch_id) is not None
+    stored = None if known else encode_raw_batch(body, scene.id)
+    # Admission (429 / 507 before any write), the blob and the queue row (BatchQueue.submit).
     record, created = container.queue.submit(
-        scene.id, batch.batch_id, content_sha256, content, len(batch.frames), admission(settings)
+        scene.id, batch.batch_id, content_sha256, stored, len(batch.frames), admission(settings)
     )
     if not created:
         response.status_code = 200

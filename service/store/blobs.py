@@ -26,18 +26,30 @@ from typing import Protocol
 import sqlalchemy as sa
 from sqlalchemy.dialects import postgresql
 
+from core.errors import PbdagError
 from service.store.engine import write_transaction
 from service.store.tables import blobs
 
 _KEY = re.compile(r"^[0-9a-f]{64}$")
 
 
-class BlobMissing(LookupError):
-    """No blob is stored under this key."""
+class BlobNotFound(KeyError):
+    """No blob is stored under the key (never written, or deleted by `pbdag gc`)."""
+
+
+class RawBatchMissing(PbdagError):
+    """A batch's raw body is not in the blob store, though nothing collected it."""
+
+    def __init__(self, batch_id: str, key: str) -> None:
+        super().__init__(f"batch {batch_id!r}: its raw body (blob {key}) is missing", "batch_id")
 
 
 class BlobStore(Protocol):
-    """Put bytes, get them back by their sha256, delete them, list the keys."""
+    """Put bytes, get them back by their sha256, delete them, list the keys.
+
+    `get` of a missing key raises `BlobNotFound`. `delete` is idempotent: it returns whether a
+    blob was there. `pbdag gc` deletes through this protocol only.
+    """
 
     # True when `put(content, connection)` commits with that connection's transaction (the
     # queue then writes the blob inside the transaction that inserts the batch's row); False
@@ -50,7 +62,7 @@ class BlobStore(Protocol):
         ...
 
     def get(self, key: str) -> bytes:
-        """The bytes stored under `key`; BlobMissing (FileNotFoundError for a folder) if none."""
+        """The bytes stored under `key`; BlobNotFound if none."""
         ...
 
     def delete(self, key: str) -> bool:
@@ -107,15 +119,24 @@ class FileBlobStore:
         return key
 
     def get(self, key: str) -> bytes:
-        """The bytes stored under `key`."""
-        return self._path(key).read_bytes()
+        """The bytes stored under `key`; BlobNotFound when there are none."""
+        try:
+            return self._path(key).read_bytes()
+        except FileNotFoundError:
+            raise BlobNotFound(key) from None
 
     def delete(self, key: str) -> bool:
-        """Remove the blob's file; False when there was none."""
+        """Remove the blob (the rename of `put` makes this atomic); False when it was absent."""
+        path = self._path(key)
         try:
-            self._path(key).unlink()
+            path.unlink()
         except FileNotFoundError:
             return False
+        directory = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(directory)
+        finally:
+            os.close(directory)
         return True
 
     def keys(self) -> Iterator[str]:
@@ -141,15 +162,12 @@ class PgBlobStore:
 
     def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
         """Insert the blob on `connection` (it commits with that transaction), or in a
-        transaction of its own. A blob already stored is not rewritten but row-locked until the
-        transaction ends: a collector that locks a blob (`SELECT ... FOR UPDATE`) before checking
-        that no batch names it then sees the batch this transaction queues."""
+        transaction of its own; a blob already stored is not written again."""
         key = blob_key(content)
-        insert = postgresql.insert(blobs).values(
-            key=key, content=content, size=len(content), created_at=time.time()
-        )
-        statement = insert.on_conflict_do_update(
-            index_elements=[blobs.c.key], set_={"key": insert.excluded.key}
+        statement = (
+            postgresql.insert(blobs)
+            .values(key=key, content=content, size=len(content), created_at=time.time())
+            .on_conflict_do_nothing(index_elements=[blobs.c.key])
         )
         if connection is not None:
             connection.execute(statement)
@@ -159,7 +177,7 @@ class PgBlobStore:
         return key
 
     def get(self, key: str) -> bytes:
-        """The bytes stored under `key`; BlobMissing when none.
+        """The bytes stored under `key`; BlobNotFound when none.
 
         Read in psycopg's binary format (a bytea in text format travels as hex: 4x slower for a
         batch); a driver error is raised as SQLAlchemy's, which the worker knows to retry."""
@@ -177,7 +195,7 @@ class PgBlobStore:
                 connection.invalidate()
                 raise sa.exc.DBAPIError.instance(GET_SQL, (key,), error, psycopg.Error) from error
         if row is None:
-            raise BlobMissing(f"no blob {key} in the database")
+            raise BlobNotFound(key)
         return bytes(row[0])
 
     def delete(self, key: str) -> bool:
@@ -213,7 +231,7 @@ class MemoryBlobStore:
         try:
             return self._blobs[key]
         except KeyError:
-            raise BlobMissing(f"no blob {key} in memory") from None
+            raise BlobNotFound(key) from None
 
     def delete(self, key: str) -> bool:
         """Forget the blob; False when there was none."""

@@ -7,7 +7,7 @@ import gc
 import time
 import uuid
 import zlib
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -369,6 +369,27 @@ class EventLog:
             if len(page) < READ_PAGE:
                 return
             cursor = page[-1].seq
+
+    def batches_of_frames(self, scene_id: str, frames: Iterable[tuple[str, str]]) -> set[str]:
+        """The batches whose events on `track_id` carry `frame_id`, for each (track_id, frame_id):
+        the batches a track's frame came in."""
+        wanted = sorted(set(frames))
+        found: set[str] = set()
+        with read_transaction(self.engine) as connection:
+            for start in range(0, len(wanted), 200):
+                chunk = wanted[start : start + 200]
+                rows = connection.execute(
+                    sa.select(events.c.batch_id)
+                    .where(
+                        events.c.scene_id == scene_id,
+                        events.c.track_id.in_([track for track, _frame in chunk]),
+                        sa.tuple_(events.c.track_id, events.c.frame_id).in_(chunk),
+                        events.c.batch_id.is_not(None),
+                    )
+                    .distinct()
+                ).scalars()
+                found |= {str(batch_id) for batch_id in rows}
+        return found
 
     # -- state --------------------------------------------------------------------------------
 

@@ -22,6 +22,7 @@ from service.store.tables import batches
 
 CLAIMABLE = ("queued", "failed")  # failed: an attempt failed, the batch waits for a retry
 UNFINISHED = ("queued", "failed", "running")  # these hold back later batches of the scene
+FINISHED = ("done", "dead")  # only these may lose their raw body to retention
 
 
 class QueueFull(PbdagError):
@@ -49,6 +50,18 @@ class QuotaExceeded(PbdagError):
 
 class NotRequeueable(StoreError):
     """Only a dead batch can be requeued."""
+
+
+class RawBatchCollected(StoreError):
+    """The batch's raw body was deleted by `pbdag gc` (retention); its events stay."""
+
+    def __init__(self, batch_id: str, collected_at: float) -> None:
+        when = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(collected_at))
+        super().__init__(
+            f"batch {batch_id!r}: its raw body was deleted by `pbdag gc` at {when} "
+            "(PBDAG_RAW_RETENTION); its events are kept",
+            "batch_id",
+        )
 
 
 @dataclass(frozen=True)
@@ -81,6 +94,7 @@ class BatchRecord:
     finished_at: float | None
     not_before: float | None
     blob_bytes: int
+    blob_collected_at: float | None
 
 
 @dataclass(frozen=True)
@@ -93,6 +107,18 @@ class Claim:
     blob_key: str
     owner: str
     attempts: int
+    blob_collected_at: float | None = None  # set only on a copy made by `pbdag repair`
+
+
+@dataclass(frozen=True)
+class Collected:
+    """A batch whose raw body `pbdag gc` marked as collected."""
+
+    id: int
+    scene_id: str
+    batch_id: str
+    blob_key: str
+    blob_bytes: int
 
 
 def held_by(claim: Claim) -> sa.ColumnElement[bool]:
@@ -128,7 +154,10 @@ class BatchQueue:
         queued, stored = connection.execute(
             sa.select(
                 sa.func.count().filter(batches.c.status.in_(UNFINISHED)),
-                sa.func.coalesce(sa.func.sum(batches.c.blob_bytes), 0),
+                sa.func.coalesce(
+                    sa.func.sum(batches.c.blob_bytes).filter(batches.c.blob_collected_at.is_(None)),
+                    0,
+                ),
             ).where(batches.c.scene_id == scene_id)
         ).one()
         if queued >= bounds.max_queued:
@@ -141,12 +170,13 @@ class BatchQueue:
         scene_id: str,
         batch_id: str,
         content_sha256: str,
-        blob: bytes,
+        blob: bytes | None,
         frame_count: int,
         bounds: Admission,
     ) -> tuple[BatchRecord, bool]:
-        """Queue a batch and its blob; (record, True) when new, the original when re-posted
-        with equal content (its blob is not written again).
+        """Queue a batch and its blob (its stored raw body); (record, True) when new, the
+        original when re-posted with equal content. `blob` is None for a batch the caller found
+        queued already (a re-post writes no blob: `pbdag gc` may have collected the first).
 
         A store that joins the transaction (PostgreSQL's table) writes the blob in the one that
         inserts the row: both commit or neither. A folder writes it durably first, after the
@@ -156,12 +186,14 @@ class BatchQueue:
         Two posts of one batch racing each other both end here: the loser of the unique
         constraint reads the winner's row (PostgreSQL's reads are not serialized as SQLite's).
         """
-        joins = self.blobs.joins_transaction
-        key = None if joins else self._put_first(scene_id, batch_id, blob, bounds)
+        first = blob is not None and not self.blobs.joins_transaction
+        key = self._put_first(scene_id, batch_id, blob, bounds) if first else None
         try:
             with write_transaction(self.engine) as connection:
                 existing = self._get(connection, scene_id, batch_id)
                 if existing is None:
+                    if blob is None:  # rows are never deleted: the caller's read was wrong
+                        raise StoreError(f"batch {batch_id!r} is not queued; its body is needed")
                     self.check_admission(scene_id, len(blob), bounds, connection)
                     blob_key = self.blobs.put(blob, connection) if key is None else key
                     connection.execute(
@@ -189,12 +221,12 @@ class BatchQueue:
         return existing, False
 
     def _put_first(
-        self, scene_id: str, batch_id: str, blob: bytes, bounds: Admission
+        self, scene_id: str, batch_id: str, blob: bytes | None, bounds: Admission
     ) -> str | None:
         """A folder's blob, before the row's transaction: written unless the batch is already
         queued (a re-post) or refused (429 / 507, raised here); its key, or None."""
         with read_transaction(self.engine) as connection:
-            if self._get(connection, scene_id, batch_id) is not None:
+            if blob is None or self._get(connection, scene_id, batch_id) is not None:
                 return None
             self.check_admission(scene_id, len(blob), bounds, connection)
         return self.blobs.put(blob)
@@ -282,11 +314,20 @@ class BatchQueue:
                     batches.c.batch_id,
                     batches.c.blob_key,
                     batches.c.attempts,
+                    batches.c.blob_collected_at,
                 )
             ).first()
         if row is None:
             return None
-        return Claim(row.id, row.scene_id, row.batch_id, row.blob_key, owner, row.attempts)
+        return Claim(
+            row.id,
+            row.scene_id,
+            row.batch_id,
+            row.blob_key,
+            owner,
+            row.attempts,
+            row.blob_collected_at,
+        )
 
     def renew(self, claim: Claim, lease_seconds: float) -> bool:
         """Extend the lease while the batch is worked on; False when it is no longer ours."""
@@ -307,7 +348,15 @@ class BatchQueue:
                 )
             ).all()
         return [
-            Claim(row.id, row.scene_id, row.batch_id, row.blob_key, row.lease_owner, row.attempts)
+            Claim(
+                row.id,
+                row.scene_id,
+                row.batch_id,
+                row.blob_key,
+                row.lease_owner,
+                row.attempts,
+                row.blob_collected_at,
+            )
             for row in rows
         ]
 
@@ -365,6 +414,7 @@ class BatchQueue:
                     batches.c.scene_id == scene_id,
                     batches.c.batch_id == batch_id,
                     batches.c.status == "dead",
+                    batches.c.blob_collected_at.is_(None),  # gc marks under the same row lock
                 )
                 .values(
                     status="queued",
@@ -379,6 +429,8 @@ class BatchQueue:
             record = self._get(connection, scene_id, batch_id)
         if record is None:
             raise NotRequeueable(f"batch {batch_id!r} does not exist", "batch_id")
+        if updated != 1 and record.blob_collected_at is not None:
+            raise RawBatchCollected(batch_id, record.blob_collected_at)
         if updated != 1:
             raise NotRequeueable(
                 f"batch {batch_id!r} is {record.status}; only a dead batch can be requeued",
@@ -391,8 +443,17 @@ class BatchQueue:
     def copy_into(
         self, connection: sa.Connection, scene_id: str, record: BatchRecord, *, done: bool
     ) -> None:
-        """A batch of another scene in this one: as it was when `done`, else queued afresh."""
+        """A batch of another scene in this one: as it was when `done`, else queued afresh.
+
+        The source row is read again under a row lock, so a `pbdag gc` running meanwhile either
+        collected it before (the copy says so, and a worker skips it) or sees the copy.
+        """
         kept = {"first_seq": record.first_seq, "last_seq": record.last_seq} if done else {}
+        collected_at = connection.execute(
+            sa.select(batches.c.blob_collected_at)
+            .where(batches.c.id == record.id)
+            .with_for_update()
+        ).scalar()
         connection.execute(
             batches.insert().values(
                 scene_id=scene_id,
@@ -405,6 +466,7 @@ class BatchQueue:
                 received_at=record.received_at,
                 finished_at=record.finished_at if done else None,
                 blob_bytes=record.blob_bytes,
+                blob_collected_at=collected_at,
                 **kept,
             )
         )
@@ -423,3 +485,61 @@ class BatchQueue:
                 finished_at=self.clock(),
             )
         )
+
+    # -- retention (`pbdag gc`) ---------------------------------------------------------------
+
+    def finished_before(self, cutoff: float) -> list[BatchRecord]:
+        """Done or dead batches finished before `cutoff` whose raw body is still kept."""
+        with read_transaction(self.engine) as connection:
+            rows = connection.execute(
+                sa.select(batches)
+                .where(
+                    batches.c.status.in_(FINISHED),
+                    batches.c.finished_at < cutoff,
+                    batches.c.blob_collected_at.is_(None),
+                )
+                .order_by(batches.c.id)
+            ).all()
+        return [_record(row) for row in rows]
+
+    def mark_collected(self, ids: list[int]) -> tuple[list[Collected], set[str]]:
+        """Mark these batches' raw bodies collected, those still finished and not yet collected;
+        (the marked ones, the keys among theirs that no uncollected row holds any more).
+
+        Only blobs of the second set may be deleted, after this commits: a requeue and a claim
+        need a row that is not collected, and `requeue` tests that under the same row lock.
+        """
+        marked: list[Collected] = []
+        with write_transaction(self.engine) as connection:
+            for start in range(0, len(ids), 500):
+                rows = connection.execute(
+                    sa.update(batches)
+                    .where(
+                        batches.c.id.in_(ids[start : start + 500]),
+                        batches.c.status.in_(FINISHED),
+                        batches.c.blob_collected_at.is_(None),
+                    )
+                    .values(blob_collected_at=self.clock())
+                    .returning(
+                        batches.c.id,
+                        batches.c.scene_id,
+                        batches.c.batch_id,
+                        batches.c.blob_key,
+                        batches.c.blob_bytes,
+                    )
+                ).all()
+                marked += [Collected(*row) for row in rows]
+            keys = sorted({item.blob_key for item in marked})
+            still_held: set[str] = set()
+            for start in range(0, len(keys), 500):
+                still_held |= set(
+                    connection.execute(
+                        sa.select(batches.c.blob_key)
+                        .where(
+                            batches.c.blob_key.in_(keys[start : start + 500]),
+                            batches.c.blob_collected_at.is_(None),
+                        )
+                        .distinct()
+                    ).scalars()
+                )
+        return sorted(marked, key=lambda item: item.id), set(keys) - still_held

@@ -60,6 +60,8 @@ batches = sa.Table(
     sa.Column("finished_at", sa.Float),
     sa.Column("not_before", sa.Float),  # a failed attempt's retry waits until then (backoff)
     sa.Column("blob_bytes", sa.BigInteger, nullable=False, server_default="0"),  # for quotas
+    # When `pbdag gc` deleted the raw batch (retention); the row and its events stay.
+    sa.Column("blob_collected_at", sa.Float),
     sa.UniqueConstraint("scene_id", "batch_id", name="uq_batches_scene_batch"),
 )
 sa.Index("ix_batches_status_id", batches.c.status, batches.c.id)

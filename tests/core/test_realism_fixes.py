@@ -96,7 +96,12 @@ def test_a_sliver_at_the_image_border_is_not_a_miss() -> None:
     assert [e for e in decide(state, sliver) if e.details().get("evidence") == "visible_miss"] == []
     anything = replace(
         state.params,
-        visibility=replace(params, min_expected_image_fraction=0.0, min_in_image_share=0.0),
+        visibility=replace(
+            params,
+            min_expected_image_fraction=0.0,
+            min_in_image_share=0.0,
+            miss_requires_empty_center=False,
+        ),
     )
     events = track_events(decide(state, sliver, anything))
     assert [e.details().get("evidence") for e in events] == ["visible_miss"]
@@ -108,7 +113,11 @@ def test_the_free_space_rule_counts_a_miss_only_where_depth_shows_free_space() -
     # Undetected but still there: depth shows its surface, not free space.
     still_there = scene_batch("undetected", MUG, detect=set())
     assert track_events(decide(state, still_there, rules=free_space)) == []
-    assert track_events(decide(state, still_there))  # the paper's gate: a visible miss
+    paper = replace(
+        state.params,
+        visibility=replace(state.params.visibility, miss_requires_empty_center=False),
+    )
+    assert track_events(decide(state, still_there, paper))  # the paper's gate: a visible miss
     # Gone: the wall behind it shows free space where it was.
     gone = track_events(decide(state, scene_batch("gone", {}), rules=free_space))
     assert [e.details()["evidence"] for e in gone] == ["visible_miss"]
@@ -273,3 +282,20 @@ def test_a_capture_that_shows_the_place_empty_counts_misses_then_releases_the_no
     book = state.tracks[book_id]
     assert book.capture_id is None  # removed: released to the frame-level front end
     assert not state.arrays.captured[state.arrays.track_ids.index(book_id)]
+
+
+def test_a_miss_counts_only_where_depth_shows_the_place_empty() -> None:
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    # Undetected but still there: the ray to its box's centre meets its own surface.
+    for i in range(12):
+        state, per_batch = run(state, [scene_batch(f"undetected{i}", MUG, detect=set())])
+        assert per_batch == [[]]
+    track = state.tracks["trk-000001"]
+    assert track.lifecycle == "confirmed" and track.visible_misses == 0
+    # Gone: the wall behind shows the place empty, and the miss counts.
+    gone = track_events(decide(state, scene_batch("gone", {})))
+    assert [e.details()["evidence"] for e in gone] == ["visible_miss"]
+    # Hidden behind a closer undetected object, its place is not seen at all: no miss.
+    occluder = ((0.2, 0.1, 1.5), 0.3)
+    hidden = scene_batch("hidden", {}, occluders=[occluder])
+    assert track_events(decide(state, hidden)) == []

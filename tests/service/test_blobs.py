@@ -14,7 +14,7 @@ from service.bootstrap import Container, blob_store, build_container
 from service.cli import main
 from service.settings import Settings, SettingsError
 from service.store.blobs import (
-    BlobMissing,
+    BlobNotFound,
     BlobStore,
     FileBlobStore,
     MemoryBlobStore,
@@ -70,7 +70,7 @@ def test_a_blob_is_named_by_its_sha256_and_can_be_listed_and_deleted(
     assert blobs.delete(key) is True
     assert blobs.delete(key) is False
     assert list(blobs.keys()) == [other]
-    with pytest.raises((BlobMissing, FileNotFoundError)):
+    with pytest.raises(BlobNotFound):
         blobs.get(key)
     blobs.put(one)
     listing = blobs.keys()  # a collector deletes while it lists

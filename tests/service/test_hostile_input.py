@@ -198,7 +198,9 @@ def test_a_scene_over_its_byte_quota_is_a_507(container: Container) -> None:
     with local_client(create_app(dataclasses.replace(container, settings=settings))) as client:
         scene = client.post("/v1/scenes", json={"name": "full"}).json()["id"]
         body = batch_body(frame_body())
-        body["frames"][0]["detections"][0]["embedding"] = [0.5] * 4000
+        # Random values: the quota counts the stored (compressed) bytes.
+        embedding = np.random.default_rng(0).random(4000).tolist()
+        body["frames"][0]["detections"][0]["embedding"] = embedding
         response = client.post(f"/v1/scenes/{scene}/batches", json=body)
         assert response.status_code == 507 and "PBDAG_MAX_SCENE_BLOB_BYTES" in response.text
 

@@ -15,7 +15,7 @@ from core.state import SceneState
 from service.bootstrap import Container
 from service.commands import create_scene, run_command
 from service.settings import Settings
-from service.store.engine import MIGRATIONS_DIR, make_engine, write_transaction
+from service.store.engine import make_engine, write_transaction
 from service.store.errors import (
     BatchConflict,
     ConcurrencyConflict,
@@ -385,18 +385,6 @@ def test_initial_state_is_empty(container: Container) -> None:
     assert state.head_seq == 0 and state.tracks == {} and isinstance(state, SceneState)
 
 
-def newest_revision() -> str:
-    """The head of migrations/versions (there is one)."""
-    from alembic.config import Config
-    from alembic.script import ScriptDirectory
-
-    config = Config()
-    config.set_main_option("script_location", str(MIGRATIONS_DIR))
-    head = ScriptDirectory.from_config(config).get_current_head()
-    assert head is not None
-    return head
-
-
 def test_concurrent_migrations_are_serialized(
     backend: str, tmp_path: Path, request: pytest.FixtureRequest
 ) -> None:
@@ -447,3 +435,17 @@ def test_a_command_is_decided_again_when_the_head_moved(container: Container) ->
 
     events, appended = run_command(container, scene.id, decide_command)
     assert calls == [0, 1] and appended.seqs == (2, 2) and events[0].type == "update"
+
+
+def newest_revision() -> str:
+    """The head of the Alembic revisions under migrations/ (one head: a fork fails here)."""
+    from alembic.config import Config
+    from alembic.script import ScriptDirectory
+
+    from service.store.engine import MIGRATIONS_DIR
+
+    config = Config()
+    config.set_main_option("script_location", str(MIGRATIONS_DIR))
+    head = ScriptDirectory.from_config(config).get_current_head()
+    assert head is not None
+    return head

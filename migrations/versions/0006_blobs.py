@@ -1,15 +1,15 @@
 """Raw batches in PostgreSQL: the `blobs` table (key -> bytea), for PBDAG_BLOB_BACKEND=postgres.
 
-Revision ID: 0005_blobs
-Revises: 0004
+Revision ID: 0006
+Revises: 0005
 Create Date: 2026-11-30
 """
 
 import sqlalchemy as sa
 from alembic import op
 
-revision = "0005_blobs"
-down_revision = "0004"
+revision = "0006"
+down_revision = "0005"
 branch_labels = None
 depends_on = None
 
