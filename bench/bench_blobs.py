@@ -3,10 +3,10 @@
     python -m bench.bench_blobs --postgres URL [--rounds 5] [--batches 30]
 
 What the API does per batch (`BatchQueue.submit`: the admission check, the blob, the queue row,
-one commit) and what a worker does first (`get` the blob), for 640x480 batch bodies as the API
-stores them today (canonical JSON rendered by the simulator: one frame, 0.43 MB; two frames,
-0.86 MB) and for a 0.25 MB body of incompressible bytes (what a compact, compressed encoding
-stores). Every blob is distinct. Backends, interleaved round by round, each round on a fresh scene:
+one commit) and what a worker does first (`get` the blob), for rendered 640x480 batches as the
+API stores them (the compact raw format: one frame about 0.32 MB, two frames about 0.64 MB) and
+as canonical JSON (the format before it, which older data dirs hold: two frames, 0.87 MB).
+Every blob is distinct. Backends, interleaved round by round, each round on a fresh scene:
 
 - `sqlite+folder`: the SQLite file and the folder (the single-host default);
 - `postgres+folder`: the queue in PostgreSQL, the blobs in a folder (PBDAG_BLOB_BACKEND=folder);
@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import os
 import statistics
 import tempfile
 import time
@@ -43,8 +42,6 @@ from service.store.engine import make_engine, migrate, write_transaction
 from service.store.event_log import EventLog
 from service.store.queue import Admission, BatchQueue
 
-# A compact encoding's body: compressed, hence incompressible bytes (random ones here).
-COMPACT_BYTES = 250_000
 UNBOUNDED = Admission(max_queued=10**9, max_blob_bytes=10**15, retry_after_seconds=1)
 
 
@@ -62,13 +59,14 @@ class Backend:
         return BatchQueue(self.engine, self.blobs)
 
 
-def canonical_bodies(count: int, frames: int) -> Iterator[bytes]:
+def canonical_bodies(count: int, frames: int, compact: bool) -> Iterator[bytes]:
     """`count` distinct blobs as the API stores them: rendered 640x480 batches of `frames`
-    frames (20 object masks, 3 fixture masks and a depth image each), validated and turned into
-    canonical JSON."""
+    frames (20 object masks, 3 fixture masks and a depth image each), validated, in the compact
+    raw format (binary depth, zstandard) or as canonical JSON (the format before it)."""
     from api_schema import BatchIn
     from bench.service_load import render_templates
     from service.codec import canonical_json
+    from service.store.raw_batches import encode_raw_batch
 
     templates = render_templates(4)
     for index in range(count):
@@ -79,7 +77,8 @@ def canonical_bodies(count: int, frames: int) -> Iterator[bytes]:
             frame = json.loads(template.body(batch_id, index + offset / 10))["frames"][0]
             frame["frame_id"] = f"{batch_id}-{offset}"
             body["frames"].append(frame)
-        yield canonical_json(BatchIn.model_validate(body).model_dump(mode="json"))
+        wire = BatchIn.model_validate(body).model_dump(mode="json")
+        yield encode_raw_batch(wire, "scn-bench") if compact else canonical_json(wire)
 
 
 @contextmanager
@@ -172,9 +171,9 @@ def bench(postgres_url: str, rounds: int, batches: int) -> dict[str, Any]:
     count = batches * rounds
     print(f"rendering {count} distinct 640x480 batch bodies of 1 and 2 frames ...", flush=True)
     sizes = {
-        "json-2-frames": list(canonical_bodies(count, 2)),
-        "json-1-frame": list(canonical_bodies(count, 1)),
-        "compact": [os.urandom(COMPACT_BYTES) for _ in range(count)],
+        "json-2-frames": list(canonical_bodies(count, 2, compact=False)),
+        "compact-2-frames": list(canonical_bodies(count, 2, compact=True)),
+        "compact-1-frame": list(canonical_bodies(count, 1, compact=True)),
     }
     results: dict[str, Any] = {"rounds": rounds, "batches_per_round": batches, "bodies": {}}
     for size_name, blobs in sizes.items():
