@@ -78,7 +78,8 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "migrate",
         help="copy every blob the queue names from the other backend to this one, checked by "
         "sha256 (idempotent; run it again to resume)",
-        description="Copy every blob the queue names into the backend --to from the other one "
+        description="Copy every blob the queue names (except those `pbdag gc` collected) into "
+        "the backend --to from the other one "
         "(the folder PBDAG_DATA_DIR/blobs, or the database's blobs table), each checked by its "
         "sha256 before and after. Blobs already in the target intact are skipped, so a second run "
         "resumes an interrupted one. Stop the API and the workers first, then start them with "

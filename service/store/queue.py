@@ -245,10 +245,14 @@ class BatchQueue:
         return None if row is None else _record(row)
 
     def blob_keys(self) -> list[str]:
-        """The key of every blob a batch names (any status), each once, in key order."""
+        """The key of every blob a batch still holds (any status, not collected by `pbdag gc`),
+        each once, in key order."""
         with read_transaction(self.engine) as connection:
             rows = connection.execute(
-                sa.select(batches.c.blob_key).distinct().order_by(batches.c.blob_key)
+                sa.select(batches.c.blob_key)
+                .where(batches.c.blob_collected_at.is_(None))
+                .distinct()
+                .order_by(batches.c.blob_key)
             ).scalars()
             return [str(key) for key in rows]
 
