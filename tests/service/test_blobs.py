@@ -272,3 +272,42 @@ def test_a_driver_error_reading_a_postgres_blob_is_sqlalchemys(
         assert blobs.get(key) == b"x" * 5000  # the pool replaced the invalidated connection
     finally:
         engine.dispose()
+
+
+def test_the_folder_is_written_before_sqlites_write_lock_is_taken(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The fsync of a folder's blob never holds the SQLite write lock (the worker's appends
+    would wait for it): another writer can begin while the blob is being written."""
+    monkeypatch.delenv("PBDAG_DATABASE_URL", raising=False)
+    monkeypatch.delenv("PBDAG_BLOB_BACKEND", raising=False)
+    container = build_container(Settings(data_dir=tmp_path, allow_anonymous_local=True))
+    with local_client(create_app(container)) as client:
+        scene_id = client.post("/v1/scenes", json={"name": "lock"}).json()["id"]
+    real_put = container.blobs.put
+    seen: list[bool] = []
+
+    def another_writer_can_begin() -> None:
+        other = sa.create_engine(f"sqlite:///{tmp_path / 'pbdag.db'}", poolclass=sa.NullPool)
+        try:
+            with other.connect() as probe:
+                probe.exec_driver_sql("PRAGMA busy_timeout=0")
+                probe.connection.driver_connection.isolation_level = None  # type: ignore[union-attr]
+                probe.exec_driver_sql("BEGIN IMMEDIATE")  # fails while a writer holds the lock
+                probe.exec_driver_sql("ROLLBACK")
+        finally:
+            other.dispose()
+
+    def put_while_probing(content: bytes, connection: sa.Connection | None = None) -> str:
+        another_writer_can_begin()
+        seen.append(connection is None)
+        return real_put(content, connection)
+
+    locked = pytest.raises(sa.exc.OperationalError, match="locked")  # the probe sees a writer
+    with locked, write_transaction(container.engine):
+        another_writer_can_begin()
+    monkeypatch.setattr(container.blobs, "put", put_while_probing)
+    record, created = container.queue.submit(scene_id, "b0", "a" * 64, b"raw", 1, BOUNDS)
+    assert created and seen == [True]
+    assert container.blobs.get(record.blob_key) == b"raw"
+    container.engine.dispose()
