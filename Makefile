@@ -49,11 +49,13 @@ bench: setup  ## the performance benchmarks (figures printed and written to benc
 	$(BIN)/python -m bench.bench_store as-of --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store versus --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_store raw
+	$(BIN)/python -m bench.bench_blobs --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_memory
 	$(BIN)/python -m bench.bench_service --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test --ramp 6,8,10,12
 
-soak: setup  ## the long fault run: 40 SIGKILLs, a PostgreSQL restart, a poison batch (about 4 minutes)
+soak: setup  ## the long fault runs: 40 SIGKILLs, a PostgreSQL restart, a poison batch; blobs in PostgreSQL, then in a shared folder; SQLite (about 6 minutes)
 	$(BIN)/python -m tests.e2e.fault_run --kills 40 --postgres-restart --poison
+	$(BIN)/python -m tests.e2e.fault_run --kills 40 --poison --blob-backend folder
 	$(BIN)/python -m tests.e2e.fault_run --kills 40 --sqlite
 
 fuzz: setup  ## schemathesis with 200 examples per operation (make test runs 15)

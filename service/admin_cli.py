@@ -1,13 +1,18 @@
 """Operator commands: `pbdag rebuild`, `pbdag requeue`, `pbdag repair`, `pbdag gc`,
-`pbdag export`."""
+`pbdag export`, `pbdag blobs migrate`."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from core.errors import PbdagError
+from service.settings import Settings
+
+if TYPE_CHECKING:
+    from service.bootstrap import Container
 
 GC_LISTED = 20  # batches `pbdag gc` names one per line; the rest are counted
 
@@ -66,6 +71,22 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     export.add_argument("--out", type=Path, help="write to this file (default: standard output)")
     export.set_defaults(handler=_export)
+
+    blobs = commands.add_parser("blobs", help="the raw batches' storage")
+    blob_commands = blobs.add_subparsers(dest="blobs_command", required=True)
+    migrate = blob_commands.add_parser(
+        "migrate",
+        help="copy every blob the queue names from the other backend to this one, checked by "
+        "sha256 (idempotent; run it again to resume)",
+        description="Copy every blob the queue names (except those `pbdag gc` collected) into "
+        "the backend --to from the other one "
+        "(the folder PBDAG_DATA_DIR/blobs, or the database's blobs table), each checked by its "
+        "sha256 before and after. Blobs already in the target intact are skipped, so a second run "
+        "resumes an interrupted one. Stop the API and the workers first, then start them with "
+        "PBDAG_BLOB_BACKEND set to the target. The source is left as it was.",
+    )
+    migrate.add_argument("--to", required=True, choices=("postgres", "folder"), dest="target")
+    migrate.set_defaults(handler=_blobs_migrate)
 
 
 def _rebuild(args: argparse.Namespace) -> int:
@@ -228,3 +249,49 @@ def _export(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     return 0
+
+
+def _blobs_migrate(args: argparse.Namespace) -> int:
+    from service.bootstrap import build_container
+    from service.store.engine import is_postgres
+
+    settings = Settings()
+    container = build_container(settings.model_copy(update={"blob_backend": "folder"}))
+    try:
+        if not is_postgres(container.engine):
+            print(
+                "pbdag blobs migrate: the database is not PostgreSQL (PBDAG_DATABASE_URL); on "
+                f"{container.engine.dialect.name} blobs can only live in the folder",
+                file=sys.stderr,
+            )
+            return 2
+        return _copy_blobs(container, settings, args.target)
+    finally:
+        container.engine.dispose()
+
+
+def _copy_blobs(container: Container, settings: Settings, to: str) -> int:
+    from service.blob_migration import migrate_blobs
+    from service.store.blobs import FileBlobStore, PgBlobStore
+
+    folder = FileBlobStore(settings.data_dir / "blobs")
+    table = PgBlobStore(container.engine)
+    source, target = (folder, table) if to == "postgres" else (table, folder)
+    where = {"folder": f"the folder {folder.root.resolve()}", "postgres": "the database"}
+    keys = container.queue.blob_keys()
+    came_from = "folder" if to == "postgres" else "postgres"
+    print(f"blobs migrate: {len(keys)} blobs named by the queue, {where[came_from]} -> {where[to]}")
+    report = migrate_blobs(keys, source, target, progress=lambda line: print(line, flush=True))
+    print(
+        f"blobs migrate: {report.copied} copied ({report.bytes_copied / 1e6:.1f} MB), "
+        f"{report.already_there} already there, {len(report.missing)} missing, "
+        f"{len(report.corrupt)} not matching their sha256, in {report.seconds:.1f} s"
+    )
+    for key in report.missing:
+        print(f"  missing in both backends: {key}", file=sys.stderr)
+    for key in report.corrupt:
+        print(f"  not matching its sha256 in the source: {key}", file=sys.stderr)
+    if report.complete:
+        print(f"blobs migrate: done; run the fleet with PBDAG_BLOB_BACKEND={to}")
+        return 0
+    return 1

@@ -15,7 +15,7 @@ from pathlib import Path
 from service.admin_cli import register as register_admin_commands
 from service.auth_cli import register as register_token_commands
 from service.logs import configure_logging
-from service.settings import Settings
+from service.settings import Settings, SettingsError
 
 OPENAPI_PATH = Path(__file__).resolve().parents[1] / "api_schema" / "openapi.json"
 
@@ -65,7 +65,7 @@ def main(argv: list[str] | None = None) -> int:
     openapi = commands.add_parser("openapi", help="write the OpenAPI document")
     openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
     register_token_commands(commands)  # `pbdag token create|list|revoke`
-    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|gc|export`
+    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|gc|export|blobs`
 
     for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from evaluation
         try:
@@ -73,15 +73,19 @@ def main(argv: list[str] | None = None) -> int:
         except Exception as error:  # a broken plugin must not take the service's commands down
             print(f"pbdag: command {entry_point.name!r} unavailable: {error}", file=sys.stderr)
     args = parser.parse_args(argv)
-    if hasattr(args, "handler"):
-        return int(args.handler(args))
     handlers = {
         "serve": _serve,
         "worker": _worker,
         "migrate": _migrate,
         "openapi": _openapi,
     }
-    return handlers[args.command](args)
+    try:
+        if hasattr(args, "handler"):
+            return int(args.handler(args))
+        return handlers[args.command](args)
+    except SettingsError as error:  # settings that cannot work together: say which, start nothing
+        print(f"pbdag: {error}", file=sys.stderr)
+        return 2
 
 
 def env_name(field: str) -> str:
@@ -165,7 +169,9 @@ def _serve(args: argparse.Namespace) -> int:
         print(refusal, file=sys.stderr)
         return 2
     print(
-        f"pbdag: database {_redacted(settings.resolved_database_url())}, data in {settings.data_dir.resolve()}"
+        f"pbdag: database {_redacted(settings.resolved_database_url())}, "
+        f"raw batches in {blob_location(container.blobs)} "
+        f"(PBDAG_BLOB_BACKEND={settings.blob_backend})"
     )
     print(
         f"pbdag: API on http://{settings.host}:{settings.port} (docs at /docs, metrics at /metrics)",
@@ -194,7 +200,10 @@ def _worker(args: argparse.Namespace) -> int:
         print(f"pbdag worker: metrics on http://127.0.0.1:{settings.metrics_port}/metrics")
     worker = Worker(container)
     if args.drain:
-        processed = worker.drain()
+        try:
+            processed = worker.drain()
+        finally:
+            container.engine.dispose()
         print(f"pbdag worker {worker.name}: processed {processed} batches")
         return 0
     stop = threading.Event()
@@ -227,6 +236,17 @@ def _openapi(args: argparse.Namespace) -> int:
     args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")
     print(f"wrote {args.out}")
     return 0
+
+
+def blob_location(blobs: object) -> str:
+    """Where a blob store keeps the raw batches, for the startup line."""
+    from service.store.blobs import FileBlobStore, PgBlobStore
+
+    if isinstance(blobs, PgBlobStore):
+        return "the database"
+    if isinstance(blobs, FileBlobStore):
+        return f"the folder {blobs.root.resolve()}"
+    return type(blobs).__name__
 
 
 def _redacted(url: str) -> str:

@@ -32,6 +32,10 @@ def parse_duration(text: str) -> float | None:
     return seconds
 
 
+class SettingsError(ValueError):
+    """Settings that cannot work together; the command stops at start, naming the variables."""
+
+
 class Settings(SecuritySettings):
     """Service settings (environment prefix PBDAG_; security ones in service/security_settings.py)."""
 
@@ -65,6 +69,13 @@ class Settings(SecuritySettings):
     database_url: str | None = Field(
         None,
         description="SQLAlchemy URL; default sqlite:///<data_dir>/pbdag.db. PostgreSQL: postgresql+psycopg://...",
+    )
+    blob_backend: Literal["auto", "postgres", "folder"] = Field(
+        "auto",
+        description="Where raw batches are kept: `postgres` (a table, written in the transaction "
+        "that queues the batch; processes share only the database), `folder` (files under "
+        "<data_dir>/blobs, shared by every process), `auto` (postgres on PostgreSQL, folder on "
+        "SQLite).",
     )
     max_body_bytes: int = Field(
         32 * 1024 * 1024, ge=1024, description="Largest accepted request body (413 beyond)."

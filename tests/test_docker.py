@@ -34,3 +34,14 @@ def test_compose_publishes_on_loopback_and_hard_codes_no_password() -> None:
         assert {"source": "postgres_password", "target": "pbdag_database_password"} in service[
             "secrets"
         ]
+
+
+def test_compose_shares_nothing_but_the_database_between_api_and_workers() -> None:
+    """The raw batches are in PostgreSQL; no volume is mounted into the API or a worker, so each
+    may run on another host."""
+    compose = yaml.safe_load((DOCKER / "compose.yaml").read_text())
+    assert set(compose["volumes"]) == {"pgdata"}
+    for name in ("api", "worker-1", "worker-2"):
+        service = compose["services"][name]
+        assert "volumes" not in service
+        assert service["environment"]["PBDAG_BLOB_BACKEND"] == "postgres"

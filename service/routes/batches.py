@@ -36,19 +36,13 @@ def post_batch(
     # Idempotency is over the canonical JSON; the blob keeps it compactly (binary depth, zstd).
     body = batch.model_dump(mode="json")
     content_sha256 = hashlib.sha256(canonical_json(body)).hexdigest()
-    bounds = admission(settings)
-    existing = container.queue.get(scene.id, batch.batch_id)
-    if existing is not None:
-        # A re-post: no blob is written (its raw body may have been collected by `pbdag gc`);
-        # submit answers with the original, or 409 for different content.
-        blob_key, blob_bytes = existing.blob_key, existing.blob_bytes
-    else:
-        stored = encode_raw_batch(body, scene.id)
-        blob_bytes = len(stored)
-        container.queue.admit(scene.id, blob_bytes, bounds)  # 429 / 507 before any write
-        blob_key = container.blobs.put(stored)
+    # A re-post writes no blob (its raw body may have been collected by `pbdag gc`): submit
+    # answers with the original, or 409 for different content.
+    known = container.queue.get(scene.id, batch.batch_id) is not None
+    stored = None if known else encode_raw_batch(body, scene.id)
+    # Admission (429 / 507 before any write), the blob and the queue row (BatchQueue.submit).
     record, created = container.queue.submit(
-        scene.id, batch.batch_id, content_sha256, blob_key, len(batch.frames), blob_bytes, bounds
+        scene.id, batch.batch_id, content_sha256, stored, len(batch.frames), admission(settings)
     )
     if not created:
         response.status_code = 200

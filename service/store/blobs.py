@@ -1,14 +1,36 @@
-"""Content-addressed blob store for raw batch payloads (depth never goes into the database)."""
+"""Content-addressed blob stores for raw batch payloads: a folder, or a table of PostgreSQL.
+
+A blob's key is the sha256 of its bytes; the bytes are opaque to the store. The queue writes a
+batch's blob with its row (`BatchQueue.submit`):
+
+- `PgBlobStore` inserts it on the connection of the transaction that inserts the row
+  (`put(content, connection)`), so both commit or roll back together: a crash never leaves a
+  queued batch without its blob, nor a blob without its batch. Processes on several hosts then
+  share nothing but the database.
+- `FileBlobStore` writes the file durably (fsync, rename) before that transaction opens (SQLite's
+  write lock is not held over the fsync): a queued batch always has its blob; a crash before the
+  commit may leave a file that no batch names, which `keys()` lists for a garbage collector.
+"""
 
 from __future__ import annotations
 
 import hashlib
 import os
+import re
 import tempfile
+import time
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Protocol
 
+import sqlalchemy as sa
+from sqlalchemy.dialects import postgresql
+
 from core.errors import PbdagError
+from service.store.engine import write_transaction
+from service.store.tables import blobs
+
+_KEY = re.compile(r"^[0-9a-f]{64}$")
 
 
 class BlobNotFound(KeyError):
@@ -23,19 +45,45 @@ class RawBatchMissing(PbdagError):
 
 
 class BlobStore(Protocol):
-    """Put bytes, get them back by their sha256, delete them.
+    """Put bytes, get them back by their sha256, delete them, list the keys.
 
     `get` of a missing key raises `BlobNotFound`. `delete` is idempotent: it returns whether a
     blob was there. `pbdag gc` deletes through this protocol only.
     """
 
-    def put(self, content: bytes) -> str: ...
-    def get(self, key: str) -> bytes: ...
-    def delete(self, key: str) -> bool: ...
+    # True when `put(content, connection)` commits with that connection's transaction (the
+    # queue then writes the blob inside the transaction that inserts the batch's row); False
+    # when `put` is durable at once (the queue then writes it before that transaction).
+    joins_transaction: bool
+
+    def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
+        """Store `content` (idempotent) and return its key. With `connection`, the blob is
+        durable once that connection's transaction commits (the enqueue's); without, on return."""
+        ...
+
+    def get(self, key: str) -> bytes:
+        """The bytes stored under `key`; BlobNotFound if none."""
+        ...
+
+    def delete(self, key: str) -> bool:
+        """Remove the blob; False when there was none. The caller decides that no batch still
+        needs it."""
+        ...
+
+    def keys(self) -> Iterator[str]:
+        """Every stored key, in no particular order."""
+        ...
+
+
+def blob_key(content: bytes) -> str:
+    """The key of `content`: its sha256 in hex."""
+    return hashlib.sha256(content).hexdigest()
 
 
 class FileBlobStore:
     """Blobs under a folder, sharded by hash; written durably before the API answers 202."""
+
+    joins_transaction = False
 
     def __init__(self, root: Path) -> None:
         self.root = root
@@ -44,9 +92,10 @@ class FileBlobStore:
     def _path(self, key: str) -> Path:
         return self.root / key[:2] / key[2:4] / key
 
-    def put(self, content: bytes) -> str:
-        """Store `content` (idempotent) and return its key."""
-        key = hashlib.sha256(content).hexdigest()
+    def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
+        """Store `content` (idempotent) and return its key; durable on return, whatever the
+        transaction of `connection` does later."""
+        key = blob_key(content)
         path = self._path(key)
         if path.exists():
             return key
@@ -90,26 +139,104 @@ class FileBlobStore:
             os.close(directory)
         return True
 
+    def keys(self) -> Iterator[str]:
+        """Every complete blob (a crash's `.incoming-*` leftovers are not blobs)."""
+        for path in self.root.glob("??/??/*"):
+            if _KEY.match(path.name) and path.is_file():
+                yield path.name
+
+
+GET_SQL = "SELECT content FROM blobs WHERE key = %s"
+
+
+class PgBlobStore:
+    """Blobs in the `blobs` table of the service's PostgreSQL database (bytea, stored out of
+    line without compression: the bytes are opaque and may already be compressed)."""
+
+    joins_transaction = True
+
+    def __init__(self, engine: sa.Engine) -> None:
+        if engine.dialect.name != "postgresql":
+            raise ValueError(f"PgBlobStore needs PostgreSQL, not {engine.dialect.name}")
+        self.engine = engine
+
+    def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
+        """Insert the blob on `connection` (it commits with that transaction), or in a
+        transaction of its own; a blob already stored is not written again."""
+        key = blob_key(content)
+        statement = (
+            postgresql.insert(blobs)
+            .values(key=key, content=content, size=len(content), created_at=time.time())
+            .on_conflict_do_nothing(index_elements=[blobs.c.key])
+        )
+        if connection is not None:
+            connection.execute(statement)
+        else:
+            with write_transaction(self.engine) as own:
+                own.execute(statement)
+        return key
+
+    def get(self, key: str) -> bytes:
+        """The bytes stored under `key`; BlobNotFound when none.
+
+        Read in psycopg's binary format (a bytea in text format travels as hex: 4x slower for a
+        batch); a driver error is raised as SQLAlchemy's, which the worker knows to retry."""
+        import psycopg
+
+        with self.engine.connect() as connection:
+            driver = connection.connection.driver_connection
+            assert driver is not None
+            try:
+                with driver.cursor(binary=True) as cursor:
+                    cursor.execute(GET_SQL, (key,))
+                    row = cursor.fetchone()
+                driver.rollback()  # end the read-only transaction the query opened
+            except psycopg.Error as error:
+                connection.invalidate()
+                raise sa.exc.DBAPIError.instance(GET_SQL, (key,), error, psycopg.Error) from error
+        if row is None:
+            raise BlobNotFound(key)
+        return bytes(row[0])
+
+    def delete(self, key: str) -> bool:
+        """Remove the blob's row; False when there was none."""
+        with write_transaction(self.engine) as connection:
+            deleted = connection.execute(sa.delete(blobs).where(blobs.c.key == key)).rowcount
+        return bool(deleted)
+
+    def keys(self) -> Iterator[str]:
+        """Every stored key, streamed (a server-side cursor)."""
+        with self.engine.connect() as connection:
+            result = connection.execution_options(yield_per=1000).execute(sa.select(blobs.c.key))
+            for key in result.scalars():
+                yield str(key)
+
 
 class MemoryBlobStore:
     """In-memory blobs for tests."""
 
+    joins_transaction = False
+
     def __init__(self) -> None:
         self._blobs: dict[str, bytes] = {}
 
-    def put(self, content: bytes) -> str:
+    def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
         """Store `content` and return its key."""
-        key = hashlib.sha256(content).hexdigest()
+        key = blob_key(content)
         self._blobs[key] = content
         return key
 
     def get(self, key: str) -> bytes:
-        """The bytes stored under `key`; BlobNotFound when there are none."""
+        """The bytes stored under `key`."""
         try:
             return self._blobs[key]
         except KeyError:
             raise BlobNotFound(key) from None
 
     def delete(self, key: str) -> bool:
-        """Remove the blob; False when it was absent."""
+        """Forget the blob; False when there was none."""
         return self._blobs.pop(key, None) is not None
+
+    def keys(self) -> Iterator[str]:
+        """Every stored key."""
+        yield from list(self._blobs)

@@ -56,6 +56,11 @@ def is_sqlite(engine: sa.Engine) -> bool:
     return engine.dialect.name == "sqlite"
 
 
+def is_postgres(engine: sa.Engine) -> bool:
+    """True for PostgreSQL."""
+    return engine.dialect.name == "postgresql"
+
+
 @contextmanager
 def write_transaction(engine: sa.Engine) -> Iterator[sa.Connection]:
     """One short write transaction (BEGIN IMMEDIATE on SQLite); commits or rolls back."""

@@ -15,6 +15,7 @@ from typing import Any
 import sqlalchemy as sa
 
 from core.errors import PbdagError
+from service.store.blobs import BlobStore
 from service.store.engine import read_transaction, write_transaction
 from service.store.errors import BatchConflict, LeaseLost, StoreError
 from service.store.tables import batches
@@ -134,10 +135,14 @@ def _record(row: sa.Row[Any]) -> BatchRecord:
 
 
 class BatchQueue:
-    """The job queue on one engine; `clock` is injectable so tests can expire leases."""
+    """The job queue on one engine, with the blob store of the raw batches; `clock` is
+    injectable so tests can expire leases."""
 
-    def __init__(self, engine: sa.Engine, clock: Callable[[], float] = time.time) -> None:
+    def __init__(
+        self, engine: sa.Engine, blobs: BlobStore, clock: Callable[[], float] = time.time
+    ) -> None:
         self.engine = engine
+        self.blobs = blobs
         self.clock = clock
 
     # -- admission ----------------------------------------------------------------------------
@@ -160,31 +165,37 @@ class BatchQueue:
         if stored + incoming_bytes > bounds.max_blob_bytes:
             raise QuotaExceeded(int(stored), incoming_bytes, bounds.max_blob_bytes)
 
-    def admit(self, scene_id: str, incoming_bytes: int, bounds: Admission) -> None:
-        """The admission check alone, before the blob is written."""
-        with read_transaction(self.engine) as connection:
-            self.check_admission(scene_id, incoming_bytes, bounds, connection)
-
     def submit(
         self,
         scene_id: str,
         batch_id: str,
         content_sha256: str,
-        blob_key: str,
+        blob: bytes | None,
         frame_count: int,
-        blob_bytes: int,
         bounds: Admission,
     ) -> tuple[BatchRecord, bool]:
-        """Queue a batch; (record, True) when new, the original when re-posted with equal content.
+        """Queue a batch and its blob (its stored raw body); (record, True) when new, the
+        original when re-posted with equal content. `blob` is None for a batch the caller found
+        queued already (a re-post writes no blob: `pbdag gc` may have collected the first).
+
+        A store that joins the transaction (PostgreSQL's table) writes the blob in the one that
+        inserts the row: both commit or neither. A folder writes it durably first, after the
+        admission check, so that SQLite's write lock is not held over the file's fsync; a crash
+        in between leaves an orphan file, never a row without its blob.
 
         Two posts of one batch racing each other both end here: the loser of the unique
         constraint reads the winner's row (PostgreSQL's reads are not serialized as SQLite's).
         """
+        first = blob is not None and not self.blobs.joins_transaction
+        key = self._put_first(scene_id, batch_id, blob, bounds) if first else None
         try:
             with write_transaction(self.engine) as connection:
                 existing = self._get(connection, scene_id, batch_id)
                 if existing is None:
-                    self.check_admission(scene_id, blob_bytes, bounds, connection)
+                    if blob is None:  # rows are never deleted: the caller's read was wrong
+                        raise StoreError(f"batch {batch_id!r} is not queued; its body is needed")
+                    self.check_admission(scene_id, len(blob), bounds, connection)
+                    blob_key = self.blobs.put(blob, connection) if key is None else key
                     connection.execute(
                         batches.insert().values(
                             scene_id=scene_id,
@@ -195,7 +206,7 @@ class BatchQueue:
                             status="queued",
                             attempts=0,
                             received_at=self.clock(),
-                            blob_bytes=blob_bytes,
+                            blob_bytes=len(blob),
                         )
                     )
                     created = self._get(connection, scene_id, batch_id)
@@ -209,6 +220,17 @@ class BatchQueue:
             raise BatchConflict(f"batch {batch_id!r} was already posted with different content")
         return existing, False
 
+    def _put_first(
+        self, scene_id: str, batch_id: str, blob: bytes | None, bounds: Admission
+    ) -> str | None:
+        """A folder's blob, before the row's transaction: written unless the batch is already
+        queued (a re-post) or refused (429 / 507, raised here); its key, or None."""
+        with read_transaction(self.engine) as connection:
+            if blob is None or self._get(connection, scene_id, batch_id) is not None:
+                return None
+            self.check_admission(scene_id, len(blob), bounds, connection)
+        return self.blobs.put(blob)
+
     # -- reads --------------------------------------------------------------------------------
 
     def get(self, scene_id: str, batch_id: str) -> BatchRecord | None:
@@ -221,6 +243,18 @@ class BatchQueue:
             sa.select(batches).where(batches.c.scene_id == scene_id, batches.c.batch_id == batch_id)
         ).first()
         return None if row is None else _record(row)
+
+    def blob_keys(self) -> list[str]:
+        """The key of every blob a batch still holds (any status, not collected by `pbdag gc`),
+        each once, in key order."""
+        with read_transaction(self.engine) as connection:
+            rows = connection.execute(
+                sa.select(batches.c.blob_key)
+                .where(batches.c.blob_collected_at.is_(None))
+                .distinct()
+                .order_by(batches.c.blob_key)
+            ).scalars()
+            return [str(key) for key in rows]
 
     def of_scene(self, scene_id: str) -> list[BatchRecord]:
         """Every batch of a scene, in arrival order."""

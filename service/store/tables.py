@@ -67,6 +67,17 @@ batches = sa.Table(
 sa.Index("ix_batches_status_id", batches.c.status, batches.c.id)
 sa.Index("ix_batches_scene_status", batches.c.scene_id, batches.c.status, batches.c.id)
 
+# Raw batches by content hash, when the blob backend is PostgreSQL (PBDAG_BLOB_BACKEND): a blob
+# is inserted in the transaction that queues its batch. Opaque bytes; unused on SQLite.
+blobs = sa.Table(
+    "blobs",
+    metadata,
+    sa.Column("key", sa.String(64), primary_key=True),  # sha256 of content, hex
+    sa.Column("content", sa.LargeBinary, nullable=False),
+    sa.Column("size", sa.BigInteger, nullable=False),
+    sa.Column("created_at", sa.Float, nullable=False),  # unix seconds
+)
+
 # Projection: the current track table, for SQL queries. Rebuilt from the log by `pbdag rebuild`.
 tracks = sa.Table(
     "tracks",

@@ -1,12 +1,15 @@
 """A scripted fault run: clients post batches while processes are SIGKILLed at random moments.
 
     python -m tests.e2e.fault_run [--kills 40] [--postgres-restart] [--poison] [--sqlite]
+                                  [--blob-backend auto|postgres|folder]
 
 On PostgreSQL (default): `pbdag serve --no-worker` and two `pbdag worker`s; on SQLite one
 `pbdag serve` with its worker. Client threads post batches to two scenes and retry each until it
 is accepted (a re-post is idempotent); a killer SIGKILLs a random process every 0.3-1.2 s and
-restarts it; optionally PostgreSQL itself is restarted once mid-run, and a poison batch is mixed
-in (accepted by the API, refused by the workers, whose limits are tighter). At the end every
+restarts it. On PostgreSQL the blobs are in the database by default and each process has its
+own data directory (`--blob-backend folder`: one shared folder). Optionally PostgreSQL itself
+is restarted once mid-run, and a poison batch is mixed in (accepted by the API, refused by the
+workers, whose limits are tighter). At the end every
 accepted batch must be done exactly once (the poison: dead, with a `batch_skipped` event), each
 scene's seqs gapless, and `pbdag rebuild` must find no difference. Everything stays on loopback.
 """
@@ -42,6 +45,7 @@ class FaultReport:
     """What a fault run did and found."""
 
     backend: str
+    blobs: str = "folder"  # where the raw batches were kept
     kills: int = 0
     kills_by_process: dict[str, int] = field(default_factory=dict)
     postgres_restarts: int = 0
@@ -155,8 +159,12 @@ def run_fault_run(
     clients: int = 3,
     seed: int = 7,
     progress: bool = True,
+    blob_backend: str = "auto",
 ) -> FaultReport:
-    """Run the faults, wait for the queue to settle, and check the log (see the module doc)."""
+    """Run the faults, wait for the queue to settle, and check the log (see the module doc).
+
+    `blob_backend` is PBDAG_BLOB_BACKEND; with the blobs in PostgreSQL (auto on PostgreSQL)
+    each process gets its own data directory, as on separate hosts."""
     started = time.monotonic()
     rng = random.Random(seed)
     port = free_port()
@@ -172,6 +180,7 @@ def run_fault_run(
         "PBDAG_RATE_LIMIT_PER_MINUTE": "0",
     }
     base_env.pop("PBDAG_DATABASE_URL", None)
+    base_env["PBDAG_BLOB_BACKEND"] = blob_backend
     if database_url is not None:
         base_env["PBDAG_DATABASE_URL"] = database_url
         commands = {
@@ -187,7 +196,13 @@ def run_fault_run(
     # changed between accepting and processing a batch).
     worker_env = {**base_env, "PBDAG_MAX_CLASS_SCORES": "5"} if poison else base_env
     envs = {name: base_env if name == "api" else worker_env for name in commands}
-    report = FaultReport(backend="postgres" if database_url else "sqlite")
+    blobs_in_postgres = database_url is not None and blob_backend in ("auto", "postgres")
+    if blobs_in_postgres:  # nothing shared but the database
+        envs = {name: {**env, "PBDAG_DATA_DIR": str(data_dir / name)} for name, env in envs.items()}
+    report = FaultReport(
+        backend="postgres" if database_url else "sqlite",
+        blobs="postgres" if blobs_in_postgres else "folder",
+    )
     log = data_dir / "fault-run.log"
     data_dir.mkdir(parents=True, exist_ok=True)
     fleet = Fleet(commands, envs, log)
@@ -345,6 +360,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--postgres-restart", action="store_true")
     parser.add_argument("--poison", action="store_true")
     parser.add_argument("--clients", type=int, default=3)
+    parser.add_argument(
+        "--blob-backend",
+        choices=("auto", "postgres", "folder"),
+        default="auto",
+        help="PBDAG_BLOB_BACKEND (auto: in PostgreSQL on PostgreSQL, each process with its own "
+        "data directory)",
+    )
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix="pbdag-fault-") as temp:
         database_url = None
@@ -365,6 +387,7 @@ def main(argv: list[str] | None = None) -> int:
                 postgres_restart=args.postgres_restart,
                 poison=args.poison,
                 clients=args.clients,
+                blob_backend=args.blob_backend,
             )
         finally:
             if schema is not None:

@@ -100,15 +100,8 @@ def test_an_old_json_blob_is_still_processed(container: Container, client: TestC
     """A data dir written before the compact format: the blob is the canonical JSON."""
     old_scene, new_scene_id = new_scene(client, "old"), new_scene(client, "new")
     canonical = canonical_of(batch("b0", 0))
-    key = container.blobs.put(canonical)
     container.queue.submit(
-        old_scene,
-        "b0",
-        sha256_of(batch("b0", 0)),
-        key,
-        1,
-        len(canonical),
-        admission(container.settings),
+        old_scene, "b0", sha256_of(batch("b0", 0)), canonical, 1, admission(container.settings)
     )
     assert post(client, new_scene_id, "b0", 0) == 202
     assert Worker(container).drain() == 2
@@ -211,8 +204,8 @@ def test_a_collected_dead_batch_cannot_be_requeued_410(
     container: Container, client: TestClient, clock: Clock
 ) -> None:
     scene_id = new_scene(client)
-    key = container.blobs.put(b"\x00not a batch")  # the worker parks it dead at once
-    container.queue.submit(scene_id, "bad", "0" * 64, key, 1, 12, admission(container.settings))
+    not_a_batch = b"\x00not a batch"  # the worker parks it dead at once
+    container.queue.submit(scene_id, "bad", "0" * 64, not_a_batch, 1, admission(container.settings))
     Worker(container).drain()
     assert rows(container, scene_id)["bad"].status == "dead"
     assert "cannot be read" in (rows(container, scene_id)["bad"].error or "")
@@ -234,8 +227,9 @@ def test_requeue_and_gc_race_one_of_them_wins(
 ) -> None:
     """gc read the candidates, then an operator requeued the batch: gc must not collect it."""
     scene_id = new_scene(client)
-    key = container.blobs.put(b"\x00not a batch")
-    container.queue.submit(scene_id, "bad", "0" * 64, key, 1, 12, admission(container.settings))
+    not_a_batch = b"\x00not a batch"
+    container.queue.submit(scene_id, "bad", "0" * 64, not_a_batch, 1, admission(container.settings))
+    key = rows(container, scene_id)["bad"].blob_key
     Worker(container).drain()
     candidates = container.queue.finished_before(clock.now + 1)
     assert [r.batch_id for r in candidates] == ["bad"]
@@ -252,10 +246,11 @@ def test_a_blob_held_by_another_uncollected_row_stays(
     rows): the blob goes only with the last row holding it."""
     first, second = new_scene(client, "a"), new_scene(client, "b")
     canonical = canonical_of(batch("b0", 0))
-    key = container.blobs.put(canonical)
     bounds = admission(container.settings)
-    for scene_id in (first, second):
-        container.queue.submit(scene_id, "b0", sha256_of(batch("b0", 0)), key, 1, 9, bounds)
+    for scene_id in (first, second):  # the same bytes: one blob, two rows
+        container.queue.submit(scene_id, "b0", sha256_of(batch("b0", 0)), canonical, 1, bounds)
+    key = rows(container, first)["b0"].blob_key
+    assert rows(container, second)["b0"].blob_key == key
     worker = Worker(container)
     assert worker.drain() == 2
     one = rows(container, first)["b0"]

@@ -247,7 +247,8 @@ class TestQueue:
         size: int = 100,
         bounds: Admission = BOUNDS,
     ) -> tuple[BatchRecord, bool]:
-        return container.queue.submit(scene_id, batch_id, sha, "blob-" + batch_id, 1, size, bounds)
+        blob = f"blob-{batch_id}".encode().ljust(size, b".")
+        return container.queue.submit(scene_id, batch_id, sha, blob, 1, bounds)
 
     def claim(self, container: Container, owner: str, lease_seconds: float) -> Claim:
         """The lease the test expects the queue to hand out."""
