@@ -2,7 +2,7 @@
 voxel map clustered anew, side by side on the same states.
 
 Two maps: the hotel-suite stream's own (about 11,000 voxels once the suite is mapped) and a
-synthetic house of nine such suites side by side (about 100,000 voxels). The batches are the
+synthetic house of as many such suites side by side as make 100,000 voxels (ten). The batches are the
 stream's own, timed on the state each follows; the state then advances by decide and fold.
 """
 
@@ -42,11 +42,11 @@ def hotel_batches(frames: int, seed: int) -> Iterator[Batch]:
 
 
 def house_of(state: SceneState, copies: int) -> SceneState:
-    """The state with its voxel map repeated `copies` times side by side (a 3 x 3 grid of
-    suites for nine), 12 m apart: the fixtures and tracks stay those of the first suite."""
+    """The state with its voxel map repeated `copies` times side by side (a grid of suites,
+    12 m apart): the fixtures and tracks stay those of the first suite."""
     voxels = state.voxels
     side = int(np.ceil(np.sqrt(copies)))
-    step = int(round(12.0 / state.params.fixtures.voxel_size_m))
+    step = round(12.0 / state.params.fixtures.voxel_size_m)
     keys, counts, sums = [], [], []
     for copy in range(copies):
         shift = np.array([(copy % side) * step, (copy // side) * step, 0])
@@ -89,7 +89,9 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--warmup-batches", type=int, default=40, help="batches that map the suite")
     parser.add_argument("--batches", type=int, default=40, help="batches timed after them")
-    parser.add_argument("--copies", type=int, default=9, help="suites in the synthetic house")
+    parser.add_argument(
+        "--house-voxels", type=int, default=100_000, help="at least this many in the house"
+    )
     parser.add_argument("--repeats", type=int, default=3, help="timings per batch and path")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
@@ -98,7 +100,8 @@ def main(argv: list[str] | None = None) -> None:
     for _ in range(args.warmup_batches):
         batch = next(stream)
         state = fold(state, decide(state, batch))
-    conditions = {"suite": state, "house": house_of(state, args.copies)}
+    copies = -(-args.house_voxels // len(state.voxels))
+    conditions = {"suite": state, "house": house_of(state, copies)}
     for condition in conditions.values():
         condition.voxels.clusters(condition.params.fixtures)  # built once, then carried on
     sizes: dict[str, list[int]] = {name: [] for name in conditions}
@@ -124,6 +127,7 @@ def main(argv: list[str] | None = None) -> None:
             samples[name]["fold"].append(folded)
     results: dict[str, Any] = {
         "scenario": "hotel-suite",
+        "house_copies": copies,
         "warmup_batches": args.warmup_batches,
         "timed_batches": timed_batches,
         "repeats": args.repeats,

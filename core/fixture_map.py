@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from core.fixtures import (
@@ -161,8 +161,13 @@ class VoxelMap:
         sums[found] = self.sums[position[found]].reshape(-1, width)
         for keys, scores in evidence:  # mask by mask, as each mask's event is folded
             at = np.searchsorted(touched, keys)
-            np.add.at(counts, at, 1)
-            np.add.at(sums, at, np.asarray(scores, dtype=np.float64))
+            row = np.asarray(scores, dtype=np.float64)
+            if at.size and bool(np.all(at[1:] > at[:-1])):  # distinct keys (as decide writes)
+                counts[at] += 1
+                sums[at] += row
+            else:  # a voxel twice in one mask counts twice, in order
+                np.add.at(counts, at, 1)
+                np.add.at(sums, at, row)
         return touched, counts, sums
 
     def merged(self, evidence: Evidence) -> VoxelMap:
@@ -425,14 +430,15 @@ def _local_update(
     # and their neighbours.
     low1 = touched_voxels.min(axis=0) - 2 * reach
     high1 = touched_voxels.max(axis=0) + 2 * reach
-    index1, _ = _in_box(before.keys, low1, high1)
-    # Dirty: the clusters of every voxel in box 1, re-clustered whole.
-    dirty = np.unique(old.cluster[index1])
-    dirty = dirty[dirty >= 0]
-    low2, high2 = low1.copy(), high1.copy()
-    for name in dirty.tolist():
-        summary = old.summaries[name]
-        low2, high2 = np.minimum(low2, summary.low), np.maximum(high2, summary.high)
+    # Dirty: the clusters whose box meets box 1 (every cluster with a voxel in it, and maybe
+    # a few more), re-clustered whole.
+    names = np.fromiter(old.summaries, dtype=np.int64, count=len(old.summaries))
+    lows = np.array([s.low for s in old.summaries.values()], dtype=np.int64).reshape(-1, 3)
+    highs = np.array([s.high for s in old.summaries.values()], dtype=np.int64).reshape(-1, 3)
+    meets = np.all((lows <= high1) & (highs >= low1), axis=1)
+    dirty = np.sort(names[meets])
+    low2 = np.minimum(low1, lows[meets].min(axis=0, initial=OFFSET))
+    high2 = np.maximum(high1, highs[meets].max(axis=0, initial=-OFFSET))
     # Box 2: those clusters and a margin of two neighbourhoods (borders around them).
     low2, high2 = low2 - 2 * reach, high2 + 2 * reach
     shape = high2 - low2 + 1 + 2  # one empty cell of padding on every side
@@ -492,8 +498,11 @@ def _local_update(
         raise AssertionError("fixture clusters: a core edge leaves the re-clustered region")
     position = np.full(keys.size, -1, np.int64)
     position[seeds] = np.arange(seeds.size)
-    graph = coo_matrix(
-        (np.ones(rows.size), (rows, position[targets])), shape=(seeds.size, seeds.size)
+    # The edges as a sparse matrix, row by row (np.nonzero gave them in row order).
+    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows, minlength=seeds.size))))
+    graph = csr_matrix(
+        (np.ones(rows.size, dtype=np.int8), position[targets], indptr),
+        shape=(seeds.size, seeds.size),
     )
     _, component = connected_components(graph, directed=False)
     cluster = old_cluster.copy()
@@ -518,44 +527,49 @@ def _local_update(
     affected = np.union1d(old_cluster[changed], cluster[changed])
     affected = affected[affected >= 0]
     summaries = dict(old.summaries)
+    # Their members, in key order, grouped by cluster.
+    members = np.flatnonzero(np.isin(cluster, affected))
+    members = members[np.argsort(cluster[members], kind="stable")]
     row_counts = np.zeros(keys.size, np.int64)
     row_sums = np.zeros((keys.size, sums.shape[1]))
     row_counts[known] = before.counts[old_index[known]]
     row_sums[known] = before.sums[old_index[known]].reshape(-1, sums.shape[1])
     row_counts[at_touched] = counts
     row_sums[at_touched] = sums
+    member_counts, member_sums = row_counts[members], row_sums[members]
+    _kept, member_scores, member_margins = kept_voxels(member_counts, member_sums, params)
+    starts = np.searchsorted(cluster[members], affected)
+    stops = np.searchsorted(cluster[members], affected, side="right")
     dirty_set = set(dirty.tolist())
-    for name in affected.tolist():
-        local_members = np.flatnonzero(cluster == name)
+    for name, start, stop in zip(affected.tolist(), starts.tolist(), stops.tolist(), strict=True):
+        rows = members[start:stop]
         if name in dirty_set or name not in old.summaries:
-            member_keys = keys[local_members]
-            member_counts = row_counts[local_members]
-            member_sums = row_sums[local_members]
-        else:
-            # A cluster outside the re-clustered region whose borders changed: its members
-            # beyond box 2 are as they were.
-            outside = np.flatnonzero(old.cluster == name)
-            outside = outside[~np.isin(outside, index2)]
-            member_keys = np.concatenate((keys[local_members], before.keys[outside]))
-            member_counts = np.concatenate((row_counts[local_members], before.counts[outside]))
-            member_sums = np.concatenate(
-                (row_sums[local_members], before.sums[outside].reshape(-1, sums.shape[1]))
+            # Re-clustered here: every member is a local voxel.
+            if start == stop:
+                summaries.pop(name, None)  # the cluster is no more
+                continue
+            part = slice(start, stop)
+            summaries[name] = cluster_summary(
+                int(kept[rows[0]]),
+                keys[rows],
+                member_counts[part],
+                member_sums[part],
+                member_scores[part],
+                member_margins[part],
+                params,
             )
-            order = np.argsort(member_keys, kind="stable")
-            member_keys = member_keys[order]
-            member_counts = member_counts[order]
-            member_sums = member_sums[order]
-        if member_keys.size == 0:
-            summaries.pop(name, None)
             continue
-        member_kept, member_scores, member_margins = kept_voxels(member_counts, member_sums, params)
+        # A cluster outside the re-clustered region whose borders changed: its members beyond
+        # box 2 are as they were.
+        outside = np.flatnonzero(old.cluster == name)
+        outside = outside[~np.isin(outside, index2)]
+        all_keys = np.concatenate((keys[rows], before.keys[outside]))
+        all_counts = np.concatenate((row_counts[rows], before.counts[outside]))
+        all_sums = np.concatenate((row_sums[rows], before.sums[outside].reshape(-1, sums.shape[1])))
+        order = np.argsort(all_keys, kind="stable")
+        all_keys, all_counts, all_sums = all_keys[order], all_counts[order], all_sums[order]
+        all_kept, all_scores, all_margins = kept_voxels(all_counts, all_sums, params)
         summaries[name] = cluster_summary(
-            int(member_kept[0]),
-            member_keys,
-            member_counts,
-            member_sums,
-            member_scores,
-            member_margins,
-            params,
+            int(all_kept[0]), all_keys, all_counts, all_sums, all_scores, all_margins, params
         )
     return keys, kept, core, cluster, summaries
