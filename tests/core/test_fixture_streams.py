@@ -24,6 +24,8 @@ from tests.core.test_fixture_map import same_proposals  # noqa: E402
 
 SCENARIOS = REPO_ROOT / "sim" / "scenarios"
 STREAMS = sorted(SCENARIOS.glob("*.yaml")) + sorted((SCENARIOS / "active").glob("*.yaml"))
+# The active floor's 20-frame passive walk (its rollouts start from it) faces no fixture.
+WITHOUT_FIXTURES = {"floor"}
 
 
 def same_fixture_batch(a: FixtureBatch, b: FixtureBatch) -> None:
@@ -55,4 +57,5 @@ def test_kept_clusters_equal_the_full_reclustering_on_every_batch(path: Path) ->
         got = fixture_batch(state, batch, state.params)
         same_fixture_batch(got, expected)
         state = fold(state, decide(state, batch))
-    assert len(state.voxels) > 0  # the stream did feed the map
+    # The comparison had something to compare (or, for a walk past no fixture, nothing).
+    assert (len(state.voxels) == 0) == (path.stem in WITHOUT_FIXTURES)
