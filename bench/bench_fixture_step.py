@@ -59,11 +59,13 @@ def house_of(state: SceneState, copies: int) -> SceneState:
     return dataclasses.replace(state, voxels=house)
 
 
-def timed_ms(state: SceneState, batch: Batch, incremental: bool) -> float:
-    """One fixture step on `state` (its clusters built beforehand, as after any batch)."""
-    started = time.perf_counter()
+def timed_ms(state: SceneState, batch: Batch, incremental: bool) -> tuple[float, float]:
+    """(wall, CPU) ms of one fixture step on `state` (its clusters built beforehand, as after
+    any batch). The process's CPU time is what the step costs a core; wall time adds whatever
+    else the shared machine runs meanwhile."""
+    started, cpu = time.perf_counter(), time.process_time()
     fixture_batch(state, batch, state.params, incremental=incremental)
-    return 1000 * (time.perf_counter() - started)
+    return 1000 * (time.perf_counter() - started), 1000 * (time.process_time() - cpu)
 
 
 def fold_ms(state: SceneState, batch: Batch) -> tuple[SceneState, float]:
@@ -106,7 +108,8 @@ def main(argv: list[str] | None = None) -> None:
         condition.voxels.clusters(condition.params.fixtures)  # built once, then carried on
     sizes: dict[str, list[int]] = {name: [] for name in conditions}
     samples: dict[str, dict[str, list[float]]] = {
-        name: {"incremental": [], "full": [], "fold": []} for name in conditions
+        name: {"incremental": [], "full": [], "incremental_cpu": [], "full_cpu": [], "fold": []}
+        for name in conditions
     }
     timed_batches = 0
     for batch in stream:
@@ -117,12 +120,13 @@ def main(argv: list[str] | None = None) -> None:
         timed_batches += 1
         for name, condition in conditions.items():
             sizes[name].append(len(condition.voxels))
-            incremental, full = [], []
+            runs: dict[str, list[tuple[float, float]]] = {"incremental": [], "full": []}
             for _ in range(args.repeats):  # interleaved: the machine's noise hits both alike
-                incremental.append(timed_ms(condition, batch, True))
-                full.append(timed_ms(condition, batch, False))
-            samples[name]["incremental"].append(min(incremental))
-            samples[name]["full"].append(min(full))
+                runs["incremental"].append(timed_ms(condition, batch, True))
+                runs["full"].append(timed_ms(condition, batch, False))
+            for path, timings in runs.items():  # the least disturbed of the repeats
+                samples[name][path].append(min(wall for wall, _cpu in timings))
+                samples[name][f"{path}_cpu"].append(min(cpu for _wall, cpu in timings))
             conditions[name], fold_time = fold_ms(condition, batch)
             samples[name]["fold"].append(fold_time)
     results: dict[str, Any] = {
@@ -136,6 +140,7 @@ def main(argv: list[str] | None = None) -> None:
     }
     for name, by_path in samples.items():
         kept, anew = summary(by_path["incremental"]), summary(by_path["full"])
+        kept_cpu, anew_cpu = summary(by_path["incremental_cpu"]), summary(by_path["full_cpu"])
         ratios = [f / i for f, i in zip(by_path["full"], by_path["incremental"], strict=True)]
         ratio = statistics.median(ratios)
         folded = summary(by_path["fold"])
@@ -143,17 +148,25 @@ def main(argv: list[str] | None = None) -> None:
             "voxels": [min(sizes[name]), max(sizes[name])],
             "incremental": kept,
             "full": anew,
+            "incremental_cpu": kept_cpu,
+            "full_cpu": anew_cpu,
             "fold_of_the_batch": folded,
             "median_ratio_full_to_incremental": ratio,
-            "goal_met": kept["median_ms"] <= GOAL_MS,
+            "goal_met_wall": kept["median_ms"] <= GOAL_MS,
+            "goal_met_cpu": kept_cpu["median_ms"] <= GOAL_MS,
         }
         print(
-            f"{name:>5} ({min(sizes[name]):,}-{max(sizes[name]):,} voxels): fixture step "
-            f"incremental median {kept['median_ms']:6.2f} ms "
-            f"(p90 {kept['p90_ms']:6.2f}, max {kept['max_ms']:6.2f}), "
-            f"full {anew['median_ms']:7.2f} ms (p90 {anew['p90_ms']:7.2f}); {ratio:5.1f}x; "
-            f"fold of the batch median {folded['median_ms']:5.2f} ms; "
-            f"goal <= {GOAL_MS:.0f} ms per batch at 100k voxels"
+            f"{name:>5} ({min(sizes[name]):,}-{max(sizes[name]):,} voxels), ms per batch, "
+            f"median / p90 / max:\n"
+            f"       incremental wall {kept['median_ms']:6.2f} / {kept['p90_ms']:6.2f} / "
+            f"{kept['max_ms']:6.2f}, CPU {kept_cpu['median_ms']:6.2f} / {kept_cpu['p90_ms']:6.2f}"
+            f" / {kept_cpu['max_ms']:6.2f}\n"
+            f"       full        wall {anew['median_ms']:6.1f} / {anew['p90_ms']:6.1f} / "
+            f"{anew['max_ms']:6.1f}, CPU {anew_cpu['median_ms']:6.1f} / {anew_cpu['p90_ms']:6.1f}"
+            f" / {anew_cpu['max_ms']:6.1f}\n"
+            f"       full / incremental {ratio:5.1f}x (median per batch); the fold of the "
+            f"batch's events {folded['median_ms']:5.2f} ms; goal <= {GOAL_MS:.0f} ms per batch "
+            f"at 100k voxels"
         )
     write_results("fixture_step", results)
 

@@ -334,9 +334,18 @@ def associate_fixtures(
     proposal strictly contained in an already matched track is absorbed by it.
     """
     pairs: list[tuple[float, str, int]] = []
+    # Only pairs under the distance gate can be eligible: found for all pairs at once (with a
+    # hair of slack), then each one's distance computed and gated as before.
+    near = np.zeros((len(proposals), len(tracks)), dtype=bool)
+    if proposals and tracks:
+        centers = np.array([p.center[:2] for p in proposals], dtype=np.float64)
+        track_centers = np.array([t.center[:2] for t in tracks], dtype=np.float64)
+        gap = track_centers[None, :, :] - centers[:, None, :]
+        near = np.hypot(gap[..., 0], gap[..., 1]) < params.max_planar_distance_m + 1e-6
     for j, proposal in enumerate(proposals):
         box = proposal.footprint
-        for track in tracks:
+        for k in np.flatnonzero(near[j]).tolist():
+            track = tracks[k]
             if not compatible(track.label, proposal, params):
                 continue
             distance = float(

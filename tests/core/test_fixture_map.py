@@ -11,10 +11,16 @@ from hypothesis import strategies as st
 from core.fixture_map import Clusters, VoxelMap, full_clusters, neighbour_offsets
 from core.fixtures import (
     FixtureProposal,
+    FixtureTrackView,
     VoxelEvidence,
+    area,
+    associate_fixtures,
+    compatible,
     fixture_proposals,
+    footprint_of,
     kept_voxels,
     merged_voxels,
+    overlap_area,
 )
 from core.masks import Mask
 from core.params import FixtureParams
@@ -187,3 +193,73 @@ def test_strided_mask_pixels_are_the_mask_pixels_on_the_stride_lattice(
     expected = mask.flat_indices()[(rows % stride == 0) & (columns % stride == 0)]
     got = mask.strided_indices(stride)
     assert got.dtype == expected.dtype and np.array_equal(got, expected)
+
+
+def eligible_pairs_unfiltered(
+    proposals: Sequence[FixtureProposal], tracks: Sequence[FixtureTrackView], params: FixtureParams
+) -> list[tuple[float, str, int]]:
+    """Every (distance, track, proposal) pair the association may match, tried one by one."""
+    pairs = []
+    for j, proposal in enumerate(proposals):
+        box = proposal.footprint
+        for track in tracks:
+            if not compatible(track.label, proposal, params):
+                continue
+            distance = float(
+                np.hypot(track.center[0] - proposal.center[0], track.center[1] - proposal.center[1])
+            )
+            if distance >= params.max_planar_distance_m:
+                continue
+            stored = footprint_of(track.center, track.extent)
+            grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
+            coverage = overlap_area(box, grown) / max(area(box), 1e-9)
+            union = area(box) + area(stored) - overlap_area(box, stored)
+            iou = overlap_area(box, stored) / max(union, 1e-9)
+            if coverage >= params.min_expanded_coverage or iou >= params.min_footprint_iou:
+                pairs.append((distance, track.track_id, j))
+    return pairs
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), proposals=st.integers(0, 30), tracks=st.integers(0, 8))
+def test_association_gates_pairs_by_distance_as_one_by_one(
+    seed: int, proposals: int, tracks: int
+) -> None:
+    rng = np.random.default_rng(seed)
+    params = FixtureParams()
+    labels = ("table", "desk")
+
+    def proposal() -> FixtureProposal:
+        label = labels[rng.integers(0, 2)]
+        return FixtureProposal(
+            label,
+            np.round(rng.uniform(0, 4, 3), 2),
+            rng.uniform(0.2, 2.0, 3),
+            10,
+            0.1,
+            0.6,
+            int(rng.integers(0, 3)),
+            None,
+            {label: 0.6, "table" if label == "desk" else "desk": float(rng.uniform(0.4, 0.6))},
+        )
+
+    found = [proposal() for _ in range(proposals)]
+    known = [
+        FixtureTrackView(
+            f"trk-{k:06d}",
+            labels[rng.integers(0, 2)],
+            tuple(float(v) for v in np.round(rng.uniform(0, 4, 3), 1)),  # type: ignore[arg-type]
+            tuple(float(v) for v in rng.uniform(0.2, 2.0, 3)),  # type: ignore[arg-type]
+        )
+        for k in range(tracks)
+    ]
+    expected = eligible_pairs_unfiltered(found, known, params)
+    matches, _absorbed = associate_fixtures(found, known, params)
+    # The greedy matching of the pairs tried one by one.
+    greedy: dict[int, str] = {}
+    used: set[str] = set()
+    for _distance, track_id, j in sorted(expected):
+        if j not in greedy and track_id not in used:
+            greedy[j] = track_id
+            used.add(track_id)
+    assert matches == greedy
