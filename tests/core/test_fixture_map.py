@@ -263,3 +263,29 @@ def test_association_gates_pairs_by_distance_as_one_by_one(
             greedy[j] = track_id
             used.add(track_id)
     assert matches == greedy
+
+
+def test_with_eps_at_two_voxels_each_batch_reclusters_the_whole_map_alike() -> None:
+    params = FixtureParams(
+        taxonomy=("table", "desk", "shelf"),
+        dbscan_eps_m=0.1,  # exactly two voxels: the offsets cannot stand for the metric test
+        dbscan_min_points=3,
+        default_size_limits=(0.0, 0.0, 0.0, 0.4, 0.4, 0.4),
+        size_limits={},
+    )
+    rng = np.random.default_rng(5)
+    voxel_map = VoxelMap()
+    for b in range(6):
+        evidence = [
+            VoxelEvidence(f"f{b}", SCORES[rng.integers(0, len(SCORES))], blob(rng, 10))
+            for _ in range(2)
+        ]
+        update = voxel_map.update(params, [(e.voxels, e.class_scores) for e in evidence], None)  # type: ignore[arg-type]
+        keys, counts, sums = merged_voxels(
+            (voxel_map.keys, voxel_map.counts, voxel_map.sums), evidence
+        )
+        kept, scores, margins = kept_voxels(counts, sums, params)
+        expected = fixture_proposals(keys, counts, sums, kept, scores, margins, evidence, params)
+        same_proposals(update.proposals(evidence), expected)
+        voxel_map = update.applied(voxel_map)
+        same_clusters(voxel_map.clusters(params), full_clusters(voxel_map, params))

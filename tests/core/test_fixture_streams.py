@@ -14,13 +14,14 @@ require_eval_extra()  # the streams are rendered by the simulator
 from api_schema import BatchIn  # noqa: E402
 from core.decide import decide  # noqa: E402
 from core.evolve import fold  # noqa: E402
+from core.fixture_map import full_clusters  # noqa: E402
 from core.fixture_step import FixtureBatch, fixture_batch  # noqa: E402
 from core.state import SceneState  # noqa: E402
 from service.codec import decode_batch  # noqa: E402
 from sim.scenario import REPO_ROOT, load_scenario  # noqa: E402
 from sim.stream import iter_frames, iter_wire_batches  # noqa: E402
 from tests.conftest import SHARED_DATA  # noqa: E402
-from tests.core.test_fixture_map import same_proposals  # noqa: E402
+from tests.core.test_fixture_map import same_clusters, same_proposals  # noqa: E402
 
 SCENARIOS = REPO_ROOT / "sim" / "scenarios"
 STREAMS = sorted(SCENARIOS.glob("*.yaml")) + sorted((SCENARIOS / "active").glob("*.yaml"))
@@ -59,3 +60,8 @@ def test_kept_clusters_equal_the_full_reclustering_on_every_batch(path: Path) ->
         state = fold(state, decide(state, batch))
     # The comparison had something to compare (or, for a walk past no fixture, nothing).
     assert (len(state.voxels) == 0) == (path.stem in WITHOUT_FIXTURES)
+    # The clusters the folds carried to the last state are those of its map built anew.
+    carried = state.voxels.cache.get("clusters")
+    assert (carried is None) == (path.stem in WITHOUT_FIXTURES)
+    if carried is not None:
+        same_clusters(carried, full_clusters(state.voxels, state.params.fixtures))
