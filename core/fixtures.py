@@ -342,7 +342,8 @@ def associate_fixtures(
         track_centers = np.array([t.center[:2] for t in tracks], dtype=np.float64)
         gap = track_centers[None, :, :] - centers[:, None, :]
         near = np.hypot(gap[..., 0], gap[..., 1]) < params.max_planar_distance_m + 1e-6
-    for j, proposal in enumerate(proposals):
+    for j in np.flatnonzero(near.any(axis=1)).tolist():
+        proposal = proposals[j]
         box = proposal.footprint
         for k in np.flatnonzero(near[j]).tolist():
             track = tracks[k]
@@ -369,12 +370,33 @@ def associate_fixtures(
         used.add(track_id)
     absorbed: dict[int, str] = {}
     by_id = {track.track_id: track for track in tracks}
-    for j, proposal in enumerate(proposals):
+    matched = [by_id[track_id] for track_id in sorted(used)]
+    # A proposal of positive area can be absorbed only by a track whose grown footprint it
+    # meets: found for all pairs at once (with a hair of slack), then checked as before.
+    meets = np.ones((len(proposals), len(matched)), dtype=bool)
+    if proposals and matched and params.residual_containment > 0:
+        boxes = np.array([p.footprint for p in proposals], dtype=np.float64)
+        grown_boxes = np.array(
+            [footprint_of(t.center, t.extent, params.footprint_expand_m) for t in matched],
+            dtype=np.float64,
+        )
+        slack = 1e-6
+        meets = (
+            (boxes[:, None, 0] < grown_boxes[None, :, 2] + slack)
+            & (grown_boxes[None, :, 0] < boxes[:, None, 2] + slack)
+            & (boxes[:, None, 1] < grown_boxes[None, :, 3] + slack)
+            & (grown_boxes[None, :, 1] < boxes[:, None, 3] + slack)
+        )
+        flat = (boxes[:, 2] - boxes[:, 0] <= 0) | (boxes[:, 3] - boxes[:, 1] <= 0)
+        meets[flat] = True  # no area: contained in anything
+    for j in np.flatnonzero(meets.any(axis=1)).tolist():
         if j in matches:
             continue
+        proposal = proposals[j]
         box = proposal.footprint
-        for track_id in sorted(used):
-            track = by_id[track_id]
+        for k in np.flatnonzero(meets[j]).tolist():
+            track = matched[k]
+            track_id = track.track_id
             grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
             if compatible(track.label, proposal, params) and overlap_area(
                 box, grown

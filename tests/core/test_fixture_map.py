@@ -195,10 +195,10 @@ def test_strided_mask_pixels_are_the_mask_pixels_on_the_stride_lattice(
     assert got.dtype == expected.dtype and np.array_equal(got, expected)
 
 
-def eligible_pairs_unfiltered(
+def associate_one_by_one(
     proposals: Sequence[FixtureProposal], tracks: Sequence[FixtureTrackView], params: FixtureParams
-) -> list[tuple[float, str, int]]:
-    """Every (distance, track, proposal) pair the association may match, tried one by one."""
+) -> tuple[dict[int, str], dict[int, str]]:
+    """The association with every pair tried one by one (no gate found for all pairs at once)."""
     pairs = []
     for j, proposal in enumerate(proposals):
         box = proposal.footprint
@@ -217,16 +217,41 @@ def eligible_pairs_unfiltered(
             iou = overlap_area(box, stored) / max(union, 1e-9)
             if coverage >= params.min_expanded_coverage or iou >= params.min_footprint_iou:
                 pairs.append((distance, track.track_id, j))
-    return pairs
+    matches: dict[int, str] = {}
+    used: set[str] = set()
+    for _distance, track_id, j in sorted(pairs):
+        if j not in matches and track_id not in used:
+            matches[j] = track_id
+            used.add(track_id)
+    absorbed: dict[int, str] = {}
+    by_id = {track.track_id: track for track in tracks}
+    for j, proposal in enumerate(proposals):
+        if j in matches:
+            continue
+        box = proposal.footprint
+        for track_id in sorted(used):
+            track = by_id[track_id]
+            grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
+            if compatible(track.label, proposal, params) and overlap_area(
+                box, grown
+            ) >= params.residual_containment * area(box):
+                absorbed[j] = track_id
+                break
+    return matches, absorbed
 
 
 @settings(max_examples=100, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), proposals=st.integers(0, 30), tracks=st.integers(0, 8))
-def test_association_gates_pairs_by_distance_as_one_by_one(
-    seed: int, proposals: int, tracks: int
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    proposals=st.integers(0, 30),
+    tracks=st.integers(0, 8),
+    containment=st.sampled_from([0.0, 0.5, 0.9]),
+)
+def test_association_gates_pairs_at_once_as_one_by_one(
+    seed: int, proposals: int, tracks: int, containment: float
 ) -> None:
     rng = np.random.default_rng(seed)
-    params = FixtureParams()
+    params = FixtureParams(residual_containment=containment)
     labels = ("table", "desk")
 
     def proposal() -> FixtureProposal:
@@ -253,16 +278,7 @@ def test_association_gates_pairs_by_distance_as_one_by_one(
         )
         for k in range(tracks)
     ]
-    expected = eligible_pairs_unfiltered(found, known, params)
-    matches, _absorbed = associate_fixtures(found, known, params)
-    # The greedy matching of the pairs tried one by one.
-    greedy: dict[int, str] = {}
-    used: set[str] = set()
-    for _distance, track_id, j in sorted(expected):
-        if j not in greedy and track_id not in used:
-            greedy[j] = track_id
-            used.add(track_id)
-    assert matches == greedy
+    assert associate_fixtures(found, known, params) == associate_one_by_one(found, known, params)
 
 
 def test_with_eps_at_two_voxels_each_batch_reclusters_the_whole_map_alike() -> None:
