@@ -39,10 +39,7 @@ from core.state import (
     SceneState,
     Track,
     Vec3,
-    VoxelKey,
 )
-
-Voxels = dict[VoxelKey, tuple[int, tuple[float, ...]]]
 
 
 def evolve(state: SceneState, event: Event) -> SceneState:
@@ -55,7 +52,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
     tracks = dict(state.tracks)
     params, name = state.params, state.name
     head_seq, next_track_number = state.head_seq, state.next_track_number
-    voxels: Voxels | None = None  # copied on first use
+    voxels = state.voxels
     baselines, source_baseline = list(state.baselines), state.source_baseline
     occupancy: GridWork | None = None  # copied on first use
     clock, plan = state.clock, state.plan
@@ -69,9 +66,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 name = event.name
                 source_baseline = None if event.baseline is None else event.baseline.__dict__
             case FixtureEvidence():
-                if voxels is None:
-                    voxels = dict(state.voxels)
-                _add_voxel_evidence(voxels, event)
+                voxels = voxels.with_event(event)
             case OccupancyEvidence():
                 if occupancy is None:
                     occupancy = GridWork(state.occupancy)
@@ -143,7 +138,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
         head_seq=head_seq,
         tracks=tracks,
         next_track_number=next_track_number,
-        voxels=state.voxels if voxels is None else voxels,
+        voxels=voxels,
         baselines=tuple(baselines),
         source_baseline=source_baseline,
         occupancy=state.occupancy if occupancy is None else occupancy.frozen(),
@@ -165,17 +160,6 @@ def _after_capture(plan: PlanLedger, event: InspectionRecorded) -> PlanLedger:
         failed_views[event.fixture_id] = (*failed_views.get(event.fixture_id, ()), event.view)
     failed_at = {**plan.failed_at_lock, event.fixture_id: plan.locks}
     return PlanLedger(lock, plan.locks, failed_views, failed_at)
-
-
-def _add_voxel_evidence(voxels: Voxels, event: FixtureEvidence) -> None:
-    """Each fixture mask adds one count and its class similarities to every voxel it covers."""
-    for detection in event.detections:
-        scores = detection.class_scores
-        flat = detection.voxels
-        for i in range(0, len(flat), 3):
-            key = (flat[i], flat[i + 1], flat[i + 2])
-            count, totals = voxels.get(key) or (0, (0.0,) * len(scores))
-            voxels[key] = (count + 1, tuple(map(operator.add, totals, scores)))
 
 
 def _apply_verdict(track: Track, event: TrackVerified, params: Params) -> Track:

@@ -28,10 +28,18 @@ class FixtureBatch:
     evidence_event: FixtureEvidence | None = None
     observed: dict[str, FixtureProposal] = field(default_factory=dict)  # track id -> proposal
     unexplained: list[FixtureProposal] = field(default_factory=list)  # new hypotheses
+    proposals: list[FixtureProposal] = field(default_factory=list)  # every plausible cluster
 
 
-def fixture_batch(state: SceneState, batch: Batch, params: Params) -> FixtureBatch:
-    """Add the batch's fixture evidence to the voxel map, cluster it and associate the clusters."""
+def fixture_batch(
+    state: SceneState, batch: Batch, params: Params, *, incremental: bool = True
+) -> FixtureBatch:
+    """Add the batch's fixture evidence to the voxel map, cluster it and associate the clusters.
+
+    The clusters are the map's kept between batches, updated near the voxels the batch covered
+    (`core.fixture_map`); `incremental=False` clusters the whole map anew, the reference they
+    equal.
+    """
     fixture_params = params.fixtures
     evidence: list[VoxelEvidence] = []
     budget = fixture_params.max_voxels_per_batch
@@ -68,12 +76,20 @@ def fixture_batch(state: SceneState, batch: Batch, params: Params) -> FixtureBat
             for e in evidence
         )
     )
-    # Query the whole accumulated map against the taxonomy, then cluster each class.
-    keys, counts, sums = merged_voxels(state.voxel_arrays, evidence)
-    kept, scores, margins = kept_voxels(counts, sums, fixture_params)
-    proposals = fixture_proposals(
-        keys, counts, sums, kept, scores, margins, evidence, fixture_params
-    )
+    # Query the accumulated map against the taxonomy, then cluster each class.
+    if incremental:
+        update = state.voxels.update(
+            fixture_params, [(e.voxels, e.class_scores) for e in evidence], result.evidence_event
+        )
+        proposals = update.proposals(evidence)
+    else:
+        voxels = state.voxels
+        keys, counts, sums = merged_voxels((voxels.keys, voxels.counts, voxels.sums), evidence)
+        kept, scores, margins = kept_voxels(counts, sums, fixture_params)
+        proposals = fixture_proposals(
+            keys, counts, sums, kept, scores, margins, evidence, fixture_params
+        )
+    result.proposals = proposals
     # A hypothesis retired unseen has left the memory in play, as retired objects do: seen
     # again, its place makes a new hypothesis. One retired by a rejection still explains its
     # cluster, so that what a verifier rejected is not proposed anew.

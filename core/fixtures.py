@@ -8,6 +8,7 @@ cluster attaches to an already matched fixture).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -76,11 +77,10 @@ def voxel_evidence(
     max_range_m: float,
 ) -> VoxelEvidence | None:
     """Back-project a fixture mask's valid depth (every `mask_pixel_stride`-th pixel) into voxels."""
-    flat_index = detection.mask.flat_indices()
     stride = params.mask_pixel_stride
-    if stride > 1:
-        rows, cols = np.divmod(flat_index, frame.intrinsics.width)
-        flat_index = flat_index[(rows % stride == 0) & (cols % stride == 0)]
+    flat_index = (
+        detection.mask.strided_indices(stride) if stride > 1 else detection.mask.flat_indices()
+    )
     depth_m = frame.depth.reshape(-1)[flat_index].astype(np.float64)
     valid = (depth_m >= min_range_m) & (depth_m <= max_range_m)
     if not valid.any():
@@ -140,10 +140,21 @@ def kept_voxels(
 
 def dbscan(points: FloatArray, eps: float, min_points: int) -> IntArray:
     """DBSCAN cluster label per point (-1 for noise): core points joined within eps, borders attached."""
+    return dbscan_with_core(points, eps, min_points)[0]
+
+
+def dbscan_with_core(
+    points: FloatArray, eps: float, min_points: int
+) -> tuple[IntArray, npt.NDArray[np.bool_]]:
+    """DBSCAN labels and the core flag of each point.
+
+    Labels number the clusters in the order of their first core point; a border point joins
+    the cluster of the lowest label among its core neighbours.
+    """
     count = len(points)
     labels = np.full(count, -1, dtype=np.int64)
     if count == 0:
-        return labels
+        return labels, np.zeros(0, dtype=bool)
     tree = cKDTree(points)
     pairs = tree.query_pairs(eps, output_type="ndarray")
     degree = np.bincount(pairs.ravel(), minlength=count) + 1  # a point is its own neighbour
@@ -159,7 +170,67 @@ def dbscan(points: FloatArray, eps: float, min_points: int) -> IntArray:
         border, anchor = (b, a) if core[a] else (a, b)
         if labels[border] == -1 or labels[anchor] < labels[border]:
             labels[border] = labels[anchor]
-    return labels
+    return labels, core
+
+
+@dataclass(frozen=True, eq=False)
+class ClusterSummary:
+    """What a cluster says whatever the batch: its proposal but for the batch's own share, and
+    its box in voxel keys (the clusters kept between batches look it up)."""
+
+    class_index: int
+    proposal: FixtureProposal | None  # None: not plausible for its class
+    low: IntArray  # (3,) smallest voxel key of its members, per axis
+    high: IntArray  # (3,) largest
+
+
+def cluster_summary(
+    class_index: int,
+    keys: IntArray,
+    counts: IntArray,
+    sums: FloatArray,
+    scores: FloatArray,
+    margins: FloatArray,
+    params: FixtureParams,
+) -> ClusterSummary:
+    """The summary of one cluster from its members' rows, in key order."""
+    label = params.taxonomy[class_index]
+    size = params.voxel_size_m
+    voxel = unpack(keys)
+    points = ((voxel + 0.5) * size).astype(np.float64)
+    low, high = points.min(axis=0) - size / 2, points.max(axis=0) + size / 2
+    extent = high - low
+    box_low, box_high = voxel.min(axis=0), voxel.max(axis=0)
+    if not plausible(label, extent, params):
+        return ClusterSummary(class_index, None, box_low, box_high)
+    means = np.ascontiguousarray(sums).sum(axis=0) / counts.sum()
+    proposal = FixtureProposal(
+        label=label,
+        center=(low + high) / 2,
+        extent=extent,
+        voxel_count=int(keys.size),
+        margin=float(margins.mean()),
+        mean_score=float(scores.mean()),
+        contributed=0,
+        best_frame=None,
+        class_means={
+            name: float(value)
+            for name, value in zip(params.taxonomy, means, strict=True)
+            if value > 0
+        },
+    )
+    return ClusterSummary(class_index, proposal, box_low, box_high)
+
+
+def batch_proposal(
+    summary: FixtureProposal, contributed: int, frames: dict[str, int]
+) -> FixtureProposal:
+    """A cluster's proposal in one batch: `contributed` of its voxels covered by the batch, and
+    `frames` the voxels each batch frame covered (the one that covered most is cropped)."""
+    best_frame = min(frames.items(), key=lambda item: (-item[1], item[0]))[0] if frames else None
+    if contributed == 0 and best_frame is None:
+        return summary
+    return dataclasses.replace(summary, contributed=contributed, best_frame=best_frame)
 
 
 def fixture_proposals(
@@ -172,13 +243,17 @@ def fixture_proposals(
     batch: Sequence[VoxelEvidence],
     params: FixtureParams,
 ) -> list[FixtureProposal]:
-    """Same-class DBSCAN clusters of kept voxels (packed `keys`) that pass the class's size limits."""
+    """Same-class DBSCAN clusters of kept voxels (packed `keys`) that pass the class's size limits.
+
+    The whole map clustered anew: the reference the clusters kept between batches
+    (`core.fixture_map`) reproduce.
+    """
     proposals: list[FixtureProposal] = []
     size = params.voxel_size_m
     covered = (
         np.unique(np.concatenate([e.voxels for e in batch])) if batch else np.zeros(0, np.int64)
     )
-    for class_index, label in enumerate(params.taxonomy):
+    for class_index in range(len(params.taxonomy)):
         members = np.flatnonzero(kept == class_index)
         if members.size == 0:
             continue
@@ -186,10 +261,16 @@ def fixture_proposals(
         cluster_of = dbscan(centers, params.dbscan_eps_m, params.dbscan_min_points)
         for cluster in np.unique(cluster_of[cluster_of >= 0]):
             inside = members[cluster_of == cluster]
-            points = centers[cluster_of == cluster]
-            low, high = points.min(axis=0) - size / 2, points.max(axis=0) + size / 2
-            extent = high - low
-            if not plausible(label, extent, params):
+            summary = cluster_summary(
+                class_index,
+                keys[inside],
+                counts[inside],
+                sums[inside],
+                scores[inside],
+                margins[inside],
+                params,
+            ).proposal
+            if summary is None:
                 continue
             cluster_keys = keys[inside]
             # The batch frame that covered most of the cluster: the one to crop for a verifier.
@@ -198,27 +279,8 @@ def fixture_proposals(
                 hits = int(np.isin(evidence.voxels, cluster_keys, assume_unique=True).sum())
                 if hits:
                     frames[evidence.frame_id] = frames.get(evidence.frame_id, 0) + hits
-            best_frame = (
-                min(frames.items(), key=lambda item: (-item[1], item[0]))[0] if frames else None
-            )
-            means = sums[inside].sum(axis=0) / counts[inside].sum()
-            proposals.append(
-                FixtureProposal(
-                    label=label,
-                    center=(low + high) / 2,
-                    extent=extent,
-                    voxel_count=int(inside.size),
-                    margin=float(margins[inside].mean()),
-                    mean_score=float(scores[inside].mean()),
-                    contributed=int(np.isin(cluster_keys, covered, assume_unique=True).sum()),
-                    best_frame=best_frame,
-                    class_means={
-                        name: float(value)
-                        for name, value in zip(params.taxonomy, means, strict=True)
-                        if value > 0
-                    },
-                )
-            )
+            contributed = int(np.isin(cluster_keys, covered, assume_unique=True).sum())
+            proposals.append(batch_proposal(summary, contributed, frames))
     return proposals
 
 
@@ -272,9 +334,19 @@ def associate_fixtures(
     proposal strictly contained in an already matched track is absorbed by it.
     """
     pairs: list[tuple[float, str, int]] = []
-    for j, proposal in enumerate(proposals):
+    # Only pairs under the distance gate can be eligible: found for all pairs at once (with a
+    # hair of slack), then each one's distance computed and gated as before.
+    near = np.zeros((len(proposals), len(tracks)), dtype=bool)
+    if proposals and tracks:
+        centers = np.array([p.center[:2] for p in proposals], dtype=np.float64)
+        track_centers = np.array([t.center[:2] for t in tracks], dtype=np.float64)
+        gap = track_centers[None, :, :] - centers[:, None, :]
+        near = np.hypot(gap[..., 0], gap[..., 1]) < params.max_planar_distance_m + 1e-6
+    for j in np.flatnonzero(near.any(axis=1)).tolist():
+        proposal = proposals[j]
         box = proposal.footprint
-        for track in tracks:
+        for k in np.flatnonzero(near[j]).tolist():
+            track = tracks[k]
             if not compatible(track.label, proposal, params):
                 continue
             distance = float(
@@ -298,12 +370,33 @@ def associate_fixtures(
         used.add(track_id)
     absorbed: dict[int, str] = {}
     by_id = {track.track_id: track for track in tracks}
-    for j, proposal in enumerate(proposals):
+    matched = [by_id[track_id] for track_id in sorted(used)]
+    # A proposal of positive area can be absorbed only by a track whose grown footprint it
+    # meets: found for all pairs at once (with a hair of slack), then checked as before.
+    meets = np.ones((len(proposals), len(matched)), dtype=bool)
+    if proposals and matched and params.residual_containment > 0:
+        boxes = np.array([p.footprint for p in proposals], dtype=np.float64)
+        grown_boxes = np.array(
+            [footprint_of(t.center, t.extent, params.footprint_expand_m) for t in matched],
+            dtype=np.float64,
+        )
+        slack = 1e-6
+        meets = (
+            (boxes[:, None, 0] < grown_boxes[None, :, 2] + slack)
+            & (grown_boxes[None, :, 0] < boxes[:, None, 2] + slack)
+            & (boxes[:, None, 1] < grown_boxes[None, :, 3] + slack)
+            & (grown_boxes[None, :, 1] < boxes[:, None, 3] + slack)
+        )
+        flat = (boxes[:, 2] - boxes[:, 0] <= 0) | (boxes[:, 3] - boxes[:, 1] <= 0)
+        meets[flat] = True  # no area: contained in anything
+    for j in np.flatnonzero(meets.any(axis=1)).tolist():
         if j in matches:
             continue
+        proposal = proposals[j]
         box = proposal.footprint
-        for track_id in sorted(used):
-            track = by_id[track_id]
+        for k in np.flatnonzero(meets[j]).tolist():
+            track = matched[k]
+            track_id = track.track_id
             grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
             if compatible(track.label, proposal, params) and overlap_area(
                 box, grown

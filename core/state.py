@@ -12,10 +12,10 @@ import numpy as np
 import numpy.typing as npt
 from pydantic import Field
 
+from core.fixture_map import VoxelMap
 from core.occupancy import OccupancyGrid
 from core.params import Params
 from core.plan_ledger import PlanLedger
-from core.voxels import pack
 
 Vec3 = tuple[float, float, float]
 # "retired": a hypothesis never published and no longer believed (a false positive, a glimpse):
@@ -335,30 +335,14 @@ class SceneState:
     tracks: Mapping[str, Track] = field(default_factory=dict)
     next_track_number: int = 1
     # The fixture voxel map: per voxel, how many fixture masks covered it and the summed class
-    # similarities, in the order of params.fixtures.taxonomy.
-    voxels: Mapping[VoxelKey, tuple[int, tuple[float, ...]]] = field(default_factory=dict)
+    # similarities, in the order of params.fixtures.taxonomy (sorted arrays; its clusters are
+    # derived from it and carried from state to state by the fold).
+    voxels: VoxelMap = field(default_factory=VoxelMap)
     baselines: tuple[BaselineRecord, ...] = ()
     source_baseline: Mapping[str, Any] | None = None  # the package this session started from
     occupancy: OccupancyGrid = field(default_factory=OccupancyGrid.empty)  # A_t
     clock: float | None = None  # the newest batch's time (from its occupancy evidence)
     plan: PlanLedger = field(default_factory=PlanLedger)  # inspection lock and failures
-
-    @cached_property
-    def voxel_arrays(
-        self,
-    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.float64]]:
-        """The voxel map as sorted packed keys, counts and class-score sums (built once per state)."""
-        if not self.voxels:
-            width = len(self.params.fixtures.taxonomy)
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, width))
-        keys = np.array(list(self.voxels.keys()), dtype=np.int64)
-        packed = pack(keys)
-        order = np.argsort(packed)
-        counts = np.fromiter(
-            (value[0] for value in self.voxels.values()), dtype=np.int64, count=len(self.voxels)
-        )
-        sums = np.array([value[1] for value in self.voxels.values()], dtype=np.float64)
-        return packed[order], counts[order], sums[order]
 
     @cached_property
     def arrays(self) -> TrackArrays:
@@ -383,9 +367,7 @@ class SceneState:
             "head_seq": self.head_seq,
             "next_track_number": self.next_track_number,
             "tracks": [self.tracks[i].to_dict() for i in sorted(self.tracks)],
-            "voxels": [
-                [*key, count, list(scores)] for key, (count, scores) in sorted(self.voxels.items())
-            ],
+            "voxels": self.voxels.records(),
             "baselines": [
                 {
                     "version": b.version,
@@ -413,7 +395,7 @@ class SceneState:
             head_seq=int(record["head_seq"]),
             tracks=tracks,
             next_track_number=int(record["next_track_number"]),
-            voxels={(v[0], v[1], v[2]): (int(v[3]), tuple(v[4])) for v in record["voxels"]},
+            voxels=VoxelMap.from_records(record["voxels"]),
             baselines=tuple(
                 BaselineRecord(b["version"], b["seq"], b["sha256"], tuple(b["fixture_ids"]))
                 for b in record["baselines"]

@@ -10,6 +10,7 @@ the details go to the server log.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import random
@@ -242,7 +243,12 @@ class Worker:
         if cached is not None and cached.head_seq == head:
             self._states.move_to_end(scene_id)
             return cached
-        return self.container.log.load_state(scene_id)
+        loaded = self.container.log.load_state(scene_id)
+        if cached is not None and loaded.voxels == cached.voxels:
+            # A command appended meanwhile (a verdict, a plan) and left the fixture voxel map
+            # as it was: keep the cached map, whose clusters need not be built anew.
+            loaded = dataclasses.replace(loaded, voxels=cached.voxels)
+        return loaded
 
     def _remember(self, scene_id: str, state: SceneState) -> None:
         self._states[scene_id] = state
