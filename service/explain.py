@@ -6,7 +6,7 @@ from collections import Counter
 from collections.abc import Iterable, Sequence
 
 from api_schema import Explanation, Removal, VisibleMiss
-from core.events import Event, Sighting, TrackRemoved, TrackRetired
+from core.events import Event, Sighting, TrackRemoved
 from core.events import VisibleMiss as MissEvent
 from service.store.event_log import StoredEvent
 from service.wire import event_out
@@ -19,13 +19,7 @@ def explain(track_id: str, stored: Sequence[StoredEvent]) -> Explanation:
     state = last.state or "unknown"
     label = _label(event for _seq, event in events)
     removal = _removal(events) if state == "removed" else None
-    if isinstance(last, TrackRetired) and last.reason == "handed_over":
-        summary = (
-            f"{track_id} ({label}) was retired at seq {events[-1][0]} (frame {last.frame_id}): "
-            f"it was {last.to} seen at its new place before its old place was seen empty, "
-            f"and handed what it saw over to {last.to}."
-        )
-    elif removal is not None:
+    if removal is not None:
         summary = (
             f"{track_id} ({label}) was removed at seq {removal.seq} (frame {removal.frame_id}): "
             f"after {len(removal.visible_misses)} visibility-admissible misses in a row, "
