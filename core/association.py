@@ -5,8 +5,6 @@ Proposals match tracks by class compatibility, 3D distance < 0.8 m and appearanc
 confusable classes (cup/mug), so class agreement is the compatibility of the proposal's class
 scores with the track's class belief, not equality of two labels. Then the unique-class fallback
 recovers an identity after large motion, but only of a track whose absence is established.
-A proposal matched to a younger track may instead go to an older identity whose absence is
-established (the hand-over: the object was seen at its new place before its old place empty).
 Last, a proposal left over that is only a piece of an object another proposal of the frame
 shows (an over-segmented mask) is set aside rather than taken for a new object.
 """
@@ -40,8 +38,6 @@ class CandidatePool:
     # established (removed, demoted, or missed where they were). A track still in place, or a
     # retired false positive, never lends its identity to an object seen elsewhere.
     recoverable: npt.NDArray[np.bool_] | None = None
-    # A row's first and last observation times (the hand-over compares them); None: no hand-over.
-    observed_span_of: Callable[[int], tuple[float, float]] | None = None
 
 
 def appearance_agrees(a: FloatArray | None, b: FloatArray | None, min_cosine: float) -> bool:
@@ -177,64 +173,6 @@ def _appearance_allows(
     return appearance_agrees(
         pool.embedding_of(row), proposal.embedding, params.min_appearance_cosine
     )
-
-
-def hand_overs(
-    proposals: Sequence[Proposal],
-    matches: Mapping[int, str],
-    pool: CandidatePool,
-    params: AssociationParams,
-) -> dict[int, str]:
-    """Proposal index -> the older identity it goes to instead of the younger track it matched.
-
-    The younger track must be a dynamic object first observed after the older one was last
-    observed; the older one is recoverable (published, its absence established) and unmatched
-    in this frame, of a compatible class. Among several older candidates appearance decides
-    with the fallback's margin; without appearance there must be exactly one. An older identity
-    two younger tracks could take goes to neither.
-    """
-    span_of = pool.observed_span_of
-    if not params.hand_over or span_of is None or pool.recoverable is None:
-        return {}
-    row_of = {track_id: row for row, track_id in enumerate(pool.track_ids)}
-    matched = {row_of[track_id] for track_id in matches.values()}
-    older = [
-        int(i)
-        for i in np.flatnonzero(pool.recoverable)
-        if int(i) not in matched
-        and pool.kinds[int(i)] == "object"
-        and (pool.eligible is None or pool.eligible[int(i)])
-    ]
-    if not older:
-        return {}
-    chosen: dict[int, int] = {}
-    for j, track_id in sorted(matches.items()):
-        young = row_of[track_id]
-        proposal = proposals[j]
-        if pool.kinds[young] != "object" or pool.recoverable[young]:
-            continue
-        first_seen = span_of(young)[0]
-        observed = class_distribution(proposal.label, proposal.class_scores)
-        candidates = [
-            row
-            for row in older
-            if row != young
-            and span_of(row)[1] < first_seen
-            and class_compatibility(pool.class_belief_of(row), observed)
-            >= params.min_class_compatibility
-        ]
-        if not candidates:
-            continue
-        choice = _by_appearance(proposal, candidates, pool, params)
-        if choice is None:
-            if len(candidates) != 1 or not _appearance_allows(
-                proposal, candidates[0], pool, params
-            ):
-                continue
-            choice = candidates[0]
-        chosen[j] = choice
-    claims = [row for row in chosen.values()]
-    return {j: pool.track_ids[row] for j, row in chosen.items() if claims.count(row) == 1}
 
 
 def fragments(

@@ -7,7 +7,6 @@ that can be in view, and events are decided only for tracks the batch has eviden
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -16,7 +15,7 @@ import numpy.typing as npt
 
 from core.association import CandidatePool
 from core.belief import class_distribution
-from core.events import Event, TrackRemoved, TrackRetired
+from core.events import Event
 from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
 from core.observation import Frame
@@ -50,7 +49,6 @@ class BatchEvidence:
     visibility: dict[str, Sighting] = field(default_factory=dict)  # best view of each track
     last_frame: str = ""
     last_timestamp: float = 0.0
-    handed_over: dict[str, str] = field(default_factory=dict)  # younger track -> older identity
 
     def __post_init__(self) -> None:
         arrays = self.state.arrays
@@ -75,11 +73,6 @@ class BatchEvidence:
         eligible = None
         if self._eligible is not None:
             eligible = np.concatenate((self._eligible, np.ones(extra, dtype=np.bool_)))
-        if self.handed_over:
-            if eligible is None:
-                eligible = np.ones(len(self._ids), dtype=np.bool_)
-            for track_id in self.handed_over:
-                eligible[self._row[track_id]] = False
         # Absence established: removed or demoted, or its place seen empty in enough batches
         # (this one counting once when it showed the place and no proposal matched the track).
         seen_empty = np.zeros(len(arrays.track_ids), dtype=np.int64)
@@ -97,25 +90,7 @@ class BatchEvidence:
             self._embedding_of,
             eligible,
             recoverable,
-            self._observed_span,
         )
-
-    def _observed_span(self, row: int) -> tuple[float, float]:
-        """A track's first and last observation times (NaN for one created in this batch)."""
-        track = self.state.tracks.get(self._ids[row])
-        if track is None or track.last_observed is None:
-            return math.nan, math.nan
-        first = track.first_observed
-        return (math.nan if first is None else first), track.last_observed
-
-    def hand_over(self, younger: str, older: str) -> None:
-        """The younger track is the older identity seen at its new place first: what the batch
-        saw of it goes to the older one, and the younger one is retired."""
-        self.handed_over[younger] = older
-        seen = self.observations.pop(younger, [])
-        if seen:
-            self.observations.setdefault(older, [])[:0] = seen
-            self._centers[self._row[older]] = seen[-1].center
 
     def held_by_capture(self, track_id: str) -> bool:
         """A fine node attached through the capture ledger: a frame's proposal it explains is
@@ -268,12 +243,8 @@ class BatchEvidence:
                 emitted += added_object(track_id, proposals, self._parents(proposals), params)
         stale = set(self._stale_hypotheses())
         concerned = set(self.fixtures) | set(self.observations) | set(self.visibility) | stale
-        concerned |= set(self.handed_over)
         for track_id in sorted(concerned - set(self.new_track_ids)):
             track = self.state.tracks[track_id]
-            if track_id in self.handed_over:
-                emitted += self._handed_over(track_id)
-                continue
             if track_id in self.fixtures:
                 emitted += observed_fixture(
                     track, self.fixtures[track_id], self.last_frame, self.last_timestamp, params
@@ -295,34 +266,6 @@ class BatchEvidence:
                     track, self.last_frame, "removed" if track.lifecycle == "removed" else "unseen"
                 )
         return emitted
-
-    def _handed_over(self, track_id: str) -> list[Event]:
-        """A younger track retired for the older identity that took its place: removed first
-        when it had been published, so the graph shows one node for the object."""
-        track = self.state.tracks[track_id]
-        older = self.handed_over[track_id]
-        events: list[Event] = []
-        if track.lifecycle in ("confirmed", "demoted"):
-            events.append(
-                TrackRemoved(
-                    track_id=track_id,
-                    state="removed",
-                    frame_id=self.last_frame,
-                    p_exist=track.p_exist,
-                    reason="handed_over",
-                )
-            )
-        events.append(
-            TrackRetired(
-                track_id=track_id,
-                state="retired",
-                frame_id=self.last_frame,
-                reason="handed_over",
-                last_observed=track.last_observed,
-                to=older,
-            )
-        )
-        return events
 
     def _stale_hypotheses(self) -> list[str]:
         """Hypotheses never published: removed ones, and those unseen for too long (section 3.3:

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from core.association import associate, fragments, hand_overs
+from core.association import associate, fragments
 from core.batch_evidence import BatchEvidence
 from core.events import Event
 from core.fixture_step import fixture_batch
@@ -37,13 +37,7 @@ def decide(
         # 4. Dynamic association: class compatibility, 3D distance < 0.8 m, appearance > 0.78,
         #    greedy 1:1, then the unique-class fallback for tracks whose absence is established;
         #    removed tracks take part (section 3.3).
-        pool = evidence.pool()
-        matches = associate(proposals, pool, params.association)
-        #    A proposal matched to a younger track goes to an older identity whose absence is
-        #    established when the younger one appeared after it was last seen (the hand-over).
-        for j, older in hand_overs(proposals, matches, pool, params.association).items():
-            evidence.hand_over(matches[j], older)
-            matches[j] = older
+        matches = associate(proposals, evidence.pool(), params.association)
         #    A leftover piece of an object another proposal shows (an over-segmented mask) is
         #    set aside, not taken for a new object.
         pieces = fragments(proposals, matches, evidence.extent_of, params.association)

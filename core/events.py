@@ -378,19 +378,17 @@ class TrackRemoved(TrackEvent):
     type: ClassVar[str] = "remove"
     p_exist: float
     visible_misses: Annotated[int | None, Omitted] = None
-    reason: Annotated[Literal["verification_rejected", "handed_over"] | None, Omitted] = None
+    reason: Annotated[Literal["verification_rejected"] | None, Omitted] = None
 
 
 @dataclass(frozen=True, kw_only=True)
 class TrackRetired(TrackEvent):
     """A hypothesis never published and no longer believed leaves the memory in play for good:
-    removed by visible misses, or unseen for `retire_unseen_hypothesis_s`; or a younger track
-    that handed what it saw over to the older identity `to` (the same object, carried)."""
+    removed by visible misses, or unseen for `retire_unseen_hypothesis_s`."""
 
     type: ClassVar[str] = "retire"
-    reason: Literal["removed", "unseen", "handed_over"]
+    reason: Literal["removed", "unseen"]
     last_observed: float | None
-    to: Annotated[str | None, Omitted] = None
 
 
 # -- verification, inspection ------------------------------------------------------------------

@@ -239,7 +239,6 @@ def _observe(
         embedding_sum=embedding_sum,
         embedding_count=track.embedding_count + event.embedding_count,
         last_observed=event.timestamp,
-        first_observed=event.timestamp if track.first_observed is None else track.first_observed,
         last_observed_frame=last.frame_id,
         batches_observed=event.batches_observed,
         visible_misses=misses,

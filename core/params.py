@@ -94,13 +94,6 @@ class AssociationParams:
     # object, not a new one: two solid objects of that size side by side span at least twice it.
     # 0 switches the rule off (every unmatched proposal is a new hypothesis, as in the paper).
     fragment_max_growth: Annotated[float, Field(ge=0.0, le=10.0)] = 1.5
-    # Not in the paper: the hand-over. An object carried away is often seen at its new place
-    # before its old place is seen empty; it becomes a new track there. Once the old identity's
-    # absence is established, a proposal matched to such a younger track (first observed after
-    # the old one was last observed) goes to the old identity, chosen as the fallback chooses
-    # (appearance with the margin, or the only candidate), and the younger track is retired:
-    # "removed tracks recover their original identity upon reassociation" (section 3.3).
-    hand_over: bool = True
 
 
 # The log-odds clamp may not exceed this: logistic() of it is still distinguishable from 1.

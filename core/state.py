@@ -25,7 +25,7 @@ TrackKind = Literal["object", "fixture"]
 VerificationStatus = Literal["pending", "confirmed", "rejected"]
 InspectionStatus = Literal["completed", "abandoned"]
 # 4: the occupancy map, the scene clock and the inspection plan; 5: fine nodes of captures
-SNAPSHOT_FORMAT_VERSION = 6
+SNAPSHOT_FORMAT_VERSION = 5
 VoxelKey = tuple[int, int, int]
 
 
@@ -55,7 +55,6 @@ class Track:
     embedding_sum: tuple[float, ...] | None = None  # appearance a_i = sum / ||sum||
     embedding_count: int = 0
     last_observed: float | None = None  # tau_i: last reliable observation time
-    first_observed: Annotated[float | None, Field(exclude_if=_none)] = None  # its first one
     last_observed_frame: str | None = None
     batches_observed: int = 0  # distinct positive batches since (re)acquisition
     visible_misses: int = 0  # visibility-admissible misses since the last positive batch
@@ -160,7 +159,6 @@ class Track:
             "inspection_attempts": self.inspection_attempts,
             "box": None if self.box is None else list(self.box),
             **({} if self.capture_id is None else {"capture_id": self.capture_id}),
-            **({} if self.first_observed is None else {"first_observed": self.first_observed}),
         }
 
     @classmethod
@@ -183,7 +181,6 @@ class Track:
             published_center=None if published is None else tuple(published),
             box=None if record["box"] is None else tuple(record["box"]),
             capture_id=record.get("capture_id"),
-            first_observed=record.get("first_observed"),
         )
         if values.keys() != _TRACK_FIELDS:
             raise ValueError(f"track record fields differ: {sorted(values.keys() ^ _TRACK_FIELDS)}")
