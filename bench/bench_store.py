@@ -11,7 +11,9 @@ dropped afterwards). Figures are printed and written to bench/results/store-*.js
 `versus` compares our log append (the expected-head update and the event rows, in one write
 transaction, as the worker appends) with the application recorder of the `eventsourcing`
 library (the `bench` extra: `pip install -e '.[bench]'`), interleaved round by round on the
-same events (about 1 kB of JSON each) in batches of 1, 20 and 500.
+same events (about 1 kB of JSON each) in batches of 1, 20 and 500; the library runs twice: with
+one aggregate for the whole stream, and with one aggregate per track (its primary key then
+indexes each track's history, as our `(scene_id, track_id, seq)` index does).
 
 `raw` measures how raw batches are kept, on the end-to-end benchmark's realistic 640x480 frames
 (20 object masks plus fixture masks, png16 Kinect-noise depth; bench/service_load.py): bytes

@@ -36,6 +36,12 @@ from service.store.tables import events, scenes, snapshots
 
 READ_PAGE = 5000
 
+# The newest snapshot at or before a seq, for psycopg's binary cursor (PostgreSQL).
+SNAPSHOT_AT_OR_BEFORE_BINARY = (
+    "SELECT format_version, body FROM snapshots WHERE scene_id = %s AND seq <= %s "
+    "ORDER BY seq DESC LIMIT 1"
+)
+
 # The conditional head update, built once (the append is the hot path).
 HEAD_UPDATE = (
     sa.update(scenes)
@@ -227,6 +233,8 @@ def decode_snapshot(body: bytes) -> SceneState:
     for track in tracks:
         count = track["recent_centers"]
         if count is not None:
+            if count < 0 or count % 3:
+                raise ValueError(f"snapshot track {track['track_id']}: {count} center values")
             track["recent_centers"] = tuple(points[point : point + count // 3])
             point += count // 3
         count = track["embedding_sum"]
@@ -457,15 +465,23 @@ class EventLog:
     def _snapshot_at_or_before(
         self, connection: sa.Connection, scene_id: str, seq: int
     ) -> SceneState | None:
-        row = connection.execute(
-            sa.select(snapshots.c.format_version, snapshots.c.body)
-            .where(snapshots.c.scene_id == scene_id, snapshots.c.seq <= seq)
-            .order_by(snapshots.c.seq.desc())
-            .limit(1)
-        ).first()
-        if row is None or row.format_version != SNAPSHOT_VERSION:
+        if connection.dialect.name == "postgresql":
+            # Binary results: psycopg's default text format sends a bytea as hex, twice its
+            # size, and decodes it in Python (a 666 kB body: 7.7 -> 1.7 ms).
+            driver: Any = connection.connection.driver_connection  # the psycopg connection
+            with driver.cursor(binary=True) as cursor:
+                cursor.execute(SNAPSHOT_AT_OR_BEFORE_BINARY, (scene_id, seq))
+                found = cursor.fetchone()
+        else:
+            found = connection.execute(
+                sa.select(snapshots.c.format_version, snapshots.c.body)
+                .where(snapshots.c.scene_id == scene_id, snapshots.c.seq <= seq)
+                .order_by(snapshots.c.seq.desc())
+                .limit(1)
+            ).first()
+        if found is None or found[0] != SNAPSHOT_VERSION:
             return None  # a cache in another format is ignored: replay from the start
-        return decode_snapshot(row.body)
+        return decode_snapshot(bytes(found[1]))
 
     def save_snapshot(self, connection: sa.Connection, scene_id: str, state: SceneState) -> None:
         """Store a snapshot of `state` at its head (inside the caller's transaction)."""

@@ -63,3 +63,16 @@ def test_a_float_block_that_does_not_fit_its_tracks_is_refused() -> None:
         decode_snapshot(_body(header, floats[:-8]))
     with pytest.raises(ValueError, match="does not fit"):
         decode_snapshot(_body(header, floats + struct.pack("<d", 1.0)))
+
+
+def test_a_track_whose_centers_are_not_triples_is_refused() -> None:
+    _log, live = live_run(
+        [{"mug_1": 0, "book_1": 1, "detect": {"mug_1", "book_1"}, "occlude": False}]
+    )
+    header, floats = _parts(encode_snapshot(live))
+    first, second = header["tracks"][0], header["tracks"][1]
+    assert first["recent_centers"] >= 3 and second["recent_centers"] >= 3
+    first["recent_centers"] -= 1  # the total still fits the block; the split does not
+    second["recent_centers"] += 1
+    with pytest.raises(ValueError, match="center values"):
+        decode_snapshot(_body(header, floats))
