@@ -118,7 +118,15 @@ def _rebuild(args: argparse.Namespace) -> int:
             f"baselines {report.baselines_differ})"
         )
         verdict = "identical" if report.identical else "DIFFERED"
-        print(f"{scene_id}: {report.events} events replayed; projections {verdict}{differences}")
+        reencoded = (
+            f"; {report.snapshots_reencoded} snapshots in an older format rewritten"
+            if report.snapshots_reencoded
+            else ""
+        )
+        print(
+            f"{scene_id}: {report.events} events replayed; projections {verdict}{differences}"
+            f"{reencoded}"
+        )
         failed |= not report.identical
     print("rebuild: some scenes differed or failed" if failed else "rebuild: no difference")
     return 1 if failed else 0

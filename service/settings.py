@@ -131,7 +131,9 @@ class Settings(SecuritySettings):
     )
     retry_max_seconds: float = Field(60.0, gt=0, description="Longest retry delay.")
     snapshot_interval: int = Field(
-        1000, description="Store a state snapshot every this many events."
+        500,
+        description="Store a state snapshot every this many events (as_of decodes the newest "
+        "one at or before its seq and folds the events after it).",
     )
     worker_poll_seconds: float = Field(0.05, description="Idle worker polling period.")
     state_cache_scenes: int = Field(

@@ -111,6 +111,9 @@ class SceneRebuild:
     tracks_differ: list[str] = field(default_factory=list)
     snapshots_differ: list[int] = field(default_factory=list)
     baselines_differ: list[int] = field(default_factory=list)
+    # Snapshots that were in an older body format (a cache `as_of` ignored): rewritten in the
+    # current one, not a difference.
+    snapshots_reencoded: int = 0
 
     @property
     def identical(self) -> bool:
@@ -125,12 +128,14 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
             row.track_id: dict(row._mapping)
             for row in connection.execute(sa.select(tracks).where(tracks.c.scene_id == scene_id))
         }
-        old_snapshots = {
-            row.seq: row.body
-            for row in connection.execute(
-                sa.select(snapshots.c.seq, snapshots.c.body).where(snapshots.c.scene_id == scene_id)
+        old_snapshots, old_formats = {}, {}
+        for row in connection.execute(
+            sa.select(snapshots.c.seq, snapshots.c.format_version, snapshots.c.body).where(
+                snapshots.c.scene_id == scene_id
             )
-        }
+        ):
+            old_snapshots[row.seq] = row.body
+            old_formats[row.seq] = row.format_version
         old_baselines = {
             row.version: (row.seq, row.sha256, row.body)
             for row in connection.execute(
@@ -191,7 +196,9 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
         for version in sorted(set(old_baselines) | set(new_baselines))
         if old_baselines.get(version) != new_baselines.get(version)
     ]
+    current = [seq for seq in sorted(old_snapshots) if old_formats[seq] == SNAPSHOT_VERSION]
+    report.snapshots_reencoded = len(old_snapshots) - len(current)
     report.snapshots_differ = [
-        seq for seq in sorted(old_snapshots) if new_snapshots.get(seq) != old_snapshots[seq]
+        seq for seq in current if new_snapshots.get(seq) != old_snapshots[seq]
     ]
     return report

@@ -23,7 +23,7 @@ from service.store.errors import (
     SceneNotFound,
     SeqOutOfRange,
 )
-from service.store.event_log import ONE_STATEMENT_MAX, SceneRecord
+from service.store.event_log import ONE_STATEMENT_MAX, SNAPSHOT_VERSION, SceneRecord
 from service.store.projection import rebuild_scene
 from service.store.queue import (
     Admission,
@@ -33,7 +33,7 @@ from service.store.queue import (
     QueueFull,
     QuotaExceeded,
 )
-from service.store.tables import tracks
+from service.store.tables import snapshots, tracks
 
 
 def added(track_id: str, x: float = 0.0) -> ObjectAdded:
@@ -215,6 +215,29 @@ def test_snapshot_in_another_format_is_ignored(container: Container) -> None:
     with container.engine.begin() as connection:
         connection.execute(sa.text("UPDATE snapshots SET format_version = 999"))
     assert container.log.load_state(scene.id).to_dict() == container.log.replay(scene.id).to_dict()
+
+
+def test_rebuild_rewrites_snapshots_of_an_older_format_without_a_difference(
+    container: Container,
+) -> None:
+    scene = new_scene(container)
+    append_batch(container, scene.id, [added("trk-000001"), added("trk-000002", 2.0)])
+    append_batch(container, scene.id, [missed("trk-000001", 0.3, 1)])
+    seqs = container.log.snapshot_seqs(scene.id)
+    assert seqs
+    with container.engine.begin() as connection:
+        connection.execute(sa.update(snapshots).values(format_version=SNAPSHOT_VERSION - 1))
+    report = rebuild_scene(container.log, scene.id)
+    assert report.identical and report.snapshots_reencoded == len(seqs)
+    with container.engine.begin() as connection:
+        formats = connection.execute(
+            sa.select(snapshots.c.seq, snapshots.c.format_version).where(
+                snapshots.c.scene_id == scene.id
+            )
+        ).all()
+    assert sorted(formats) == [(seq, SNAPSHOT_VERSION) for seq in seqs]
+    report = rebuild_scene(container.log, scene.id)
+    assert report.identical and report.snapshots_reencoded == 0
 
 
 def test_rebuild_reports_no_difference_then_detects_a_tampered_projection(
