@@ -1,0 +1,1 @@
+"""Tests of the benchmarks' summary (no benchmark is run)."""
