@@ -373,7 +373,13 @@ def read_service(data: dict[str, Any]) -> list[Figure]:
     at_rate = goals.get("one_worker_at_rate")
     ramp = goals.get("one_worker_sustains_per_s")
     if at_rate is None:
-        figures.append(Figure("service, one worker", "not measured in this run"))
+        figures.append(
+            Figure(
+                "service end to end, one worker, one scene",
+                "not measured in this run",
+                goal="service_one_worker",
+            )
+        )
     else:
         one = configs[at_rate["config"]]
         text = (
@@ -409,7 +415,11 @@ def read_service(data: dict[str, Any]) -> list[Figure]:
     scaling = goals.get("two_workers_scaling")
     if scaling is None:
         figures.append(
-            Figure("service, two workers on two scenes", "not measured in this run", goal=None)
+            Figure(
+                "service end to end, two workers on two scenes",
+                "not measured in this run (needs --postgres)",
+                goal="service_two_workers",
+            )
         )
     else:
         bound = goals.get("cpu_bound", {})

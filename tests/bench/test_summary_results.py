@@ -300,7 +300,7 @@ def write_memory(mp: pytest.MonkeyPatch) -> None:
     bench_memory.main([])
 
 
-def write_service(mp: pytest.MonkeyPatch) -> None:
+def write_service(mp: pytest.MonkeyPatch, argv: list[str] | None = None) -> None:
     from bench import bench_service
     from bench.service_report import Figures
 
@@ -338,7 +338,8 @@ def write_service(mp: pytest.MonkeyPatch) -> None:
     mp.setattr(bench_service, "run_config", run_config)
     mp.setattr(signal, "signal", lambda *args: None)
     bench_service.main(
-        [
+        argv
+        or [
             "--postgres",
             "URL",
             "--ramp",
@@ -506,3 +507,14 @@ def test_readme_regeneration_replaces_only_the_rows_run_and_is_idempotent(
     assert "full re-clustering 173 ms (23.7x)" in fixture
     assert "(goal median <= 10 ms per batch at 100k voxels: met)" in fixture
     assert "raw batch kept per 640x480 frame (png16 depth" in once  # not run: kept as written
+
+
+def test_a_service_run_without_postgresql_judges_what_it_measured(
+    results: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    write_service(monkeypatch, ["--seconds", "2", "--name", "service-sqlite"])
+    one, two = (row for row in summary(results) if row.benchmark == "service")
+    assert one.figure == "(a) at 30/s: 10.7 done/s, p99 19,000 ms"
+    assert one.verdict == "missed: 10.7/s (64% short), p99 19,000 ms at 30/s"
+    assert two.figure == "not measured in this run (needs --postgres)"
+    assert (two.goal, two.verdict) == (">= 1.8x one worker (2 scenes each)", "not measured")
