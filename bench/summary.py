@@ -692,7 +692,10 @@ def main(argv: list[str] | None = None) -> None:
     print(f"wrote {path}")
     if args.write_readme:
         before = args.readme.read_text()
-        after = rewrite_readme(before, rows)
+        try:
+            after = rewrite_readme(before, rows)
+        except ValueError as error:
+            sys.exit(f"{args.readme}: {error}")
         if after != before:
             args.readme.write_text(after)
         print(f"{'rewrote' if after != before else 'unchanged:'} {args.readme}")
