@@ -324,6 +324,29 @@ class FixtureTrackView:
     extent: tuple[float, float, float]
 
 
+def eligible_distance(
+    track: FixtureTrackView, proposal: FixtureProposal, params: FixtureParams
+) -> float | None:
+    """The pair's planar distance when it is eligible: the same class, under the distance gate,
+    and the proposal mostly inside the track's expanded footprint or with enough IoU."""
+    if not compatible(track.label, proposal, params):
+        return None
+    distance = float(
+        np.hypot(track.center[0] - proposal.center[0], track.center[1] - proposal.center[1])
+    )
+    if distance >= params.max_planar_distance_m:
+        return None
+    box = proposal.footprint
+    stored = footprint_of(track.center, track.extent)
+    grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
+    coverage = overlap_area(box, grown) / max(area(box), 1e-9)
+    union = area(box) + area(stored) - overlap_area(box, stored)
+    iou = overlap_area(box, stored) / max(union, 1e-9)
+    if coverage >= params.min_expanded_coverage or iou >= params.min_footprint_iou:
+        return distance
+    return None
+
+
 def associate_fixtures(
     proposals: Sequence[FixtureProposal], tracks: Sequence[FixtureTrackView], params: FixtureParams
 ) -> tuple[dict[int, str], dict[int, str]]:
@@ -344,23 +367,10 @@ def associate_fixtures(
         near = np.hypot(gap[..., 0], gap[..., 1]) < params.max_planar_distance_m + 1e-6
     for j in np.flatnonzero(near.any(axis=1)).tolist():
         proposal = proposals[j]
-        box = proposal.footprint
         for k in np.flatnonzero(near[j]).tolist():
-            track = tracks[k]
-            if not compatible(track.label, proposal, params):
-                continue
-            distance = float(
-                np.hypot(track.center[0] - proposal.center[0], track.center[1] - proposal.center[1])
-            )
-            if distance >= params.max_planar_distance_m:
-                continue
-            stored = footprint_of(track.center, track.extent)
-            grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
-            coverage = overlap_area(box, grown) / max(area(box), 1e-9)
-            union = area(box) + area(stored) - overlap_area(box, stored)
-            iou = overlap_area(box, stored) / max(union, 1e-9)
-            if coverage >= params.min_expanded_coverage or iou >= params.min_footprint_iou:
-                pairs.append((distance, track.track_id, j))
+            distance = eligible_distance(tracks[k], proposal, params)
+            if distance is not None:
+                pairs.append((distance, tracks[k].track_id, j))
     matches: dict[int, str] = {}
     used: set[str] = set()
     for _distance, track_id, j in sorted(pairs):

@@ -16,6 +16,7 @@ from core.fixtures import (
     area,
     associate_fixtures,
     compatible,
+    eligible_distance,
     fixture_proposals,
     footprint_of,
     kept_voxels,
@@ -201,21 +202,9 @@ def associate_one_by_one(
     """The association with every pair tried one by one (no gate found for all pairs at once)."""
     pairs = []
     for j, proposal in enumerate(proposals):
-        box = proposal.footprint
         for track in tracks:
-            if not compatible(track.label, proposal, params):
-                continue
-            distance = float(
-                np.hypot(track.center[0] - proposal.center[0], track.center[1] - proposal.center[1])
-            )
-            if distance >= params.max_planar_distance_m:
-                continue
-            stored = footprint_of(track.center, track.extent)
-            grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
-            coverage = overlap_area(box, grown) / max(area(box), 1e-9)
-            union = area(box) + area(stored) - overlap_area(box, stored)
-            iou = overlap_area(box, stored) / max(union, 1e-9)
-            if coverage >= params.min_expanded_coverage or iou >= params.min_footprint_iou:
+            distance = eligible_distance(track, proposal, params)
+            if distance is not None:
                 pairs.append((distance, track.track_id, j))
     matches: dict[int, str] = {}
     used: set[str] = set()
