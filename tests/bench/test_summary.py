@@ -11,15 +11,14 @@ import pytest
 from bench.summary import (
     BENCHES,
     END_MARKER,
-    GOALS,
     START_MARKER,
-    Goal,
     invocation,
     main,
     rewrite_readme,
     split_row,
     summary,
 )
+from bench.summary_readers import GOALS, Goal
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 
