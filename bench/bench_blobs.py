@@ -40,7 +40,8 @@ from core.params import Params
 from service.store.blobs import BlobStore, FileBlobStore, PgBlobStore
 from service.store.engine import make_engine, migrate, write_transaction
 from service.store.event_log import EventLog
-from service.store.queue import Admission, BatchQueue
+from service.store.queue import BatchQueue
+from service.store.queue_records import Admission
 
 UNBOUNDED = Admission(max_queued=10**9, max_blob_bytes=10**15, retry_after_seconds=1)
 

@@ -12,7 +12,7 @@ from service.settings import Settings
 from service.states import StateReader
 from service.store.errors import SceneQuarantined
 from service.store.event_log import SceneRecord
-from service.store.queue import Admission
+from service.store.queue_records import Admission
 
 # Largest integer a query or path may carry: the databases store 64-bit signed integers.
 MAX_INT = 2**63 - 1

@@ -46,7 +46,7 @@ from service.store.errors import (
     StoreError,
     UnreadableEvent,
 )
-from service.store.queue import NotRequeueable, QueueFull, QuotaExceeded, RawBatchCollected
+from service.store.queue_records import NotRequeueable, QueueFull, QuotaExceeded, RawBatchCollected
 
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 

@@ -35,7 +35,7 @@ from core.errors import PbdagError
 from core.graph import pending_verifications
 from core.planner import unresolved_fixtures
 from service.bootstrap import Container
-from service.store.queue import BatchRecord
+from service.store.queue_records import BatchRecord
 
 
 @dataclass

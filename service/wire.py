@@ -33,7 +33,7 @@ from core.planner import Candidate, Plan
 from core.state import SceneState, Track
 from service.store.baselines import StoredPackage
 from service.store.event_log import SceneRecord, StoredEvent
-from service.store.queue import BatchRecord
+from service.store.queue_records import BatchRecord
 
 
 def scene_out(record: SceneRecord) -> Scene:

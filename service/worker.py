@@ -33,7 +33,7 @@ from service.codec import decode_batch
 from service.logs import log_context
 from service.store.blobs import BlobNotFound, RawBatchMissing
 from service.store.errors import ConcurrencyConflict, LeaseLost
-from service.store.queue import Claim, RawBatchCollected
+from service.store.queue_records import Claim, RawBatchCollected
 from service.store.raw_batches import decode_raw_batch
 
 logger = logging.getLogger("pbdag.worker")

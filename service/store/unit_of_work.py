@@ -20,7 +20,8 @@ from core.state import SceneState
 from service.store.engine import write_transaction
 from service.store.event_log import EventLog, SceneRecord, snapshot_due
 from service.store.projection import last_seq_by_track, write_baseline, write_tracks
-from service.store.queue import BatchQueue, Claim
+from service.store.queue import BatchQueue
+from service.store.queue_records import Claim
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,7 @@ from service.store.blobs import (
     PgBlobStore,
 )
 from service.store.engine import make_engine, migrate, write_transaction
-from service.store.queue import Admission
+from service.store.queue_records import Admission
 from service.store.tables import batches
 from service.store.tables import blobs as blobs_table
 from tests.clients import local_client

@@ -26,7 +26,7 @@ from service.retention import collect
 from service.settings import Settings, parse_duration
 from service.store.blobs import BlobNotFound
 from service.store.engine import write_transaction
-from service.store.queue import BatchRecord, RawBatchCollected
+from service.store.queue_records import BatchRecord, RawBatchCollected
 from service.store.raw_batches import decode_raw_batch, raw_batch_format
 from service.worker import Worker
 from tests.clients import local_client

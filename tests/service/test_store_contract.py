@@ -25,7 +25,7 @@ from service.store.errors import (
 )
 from service.store.event_log import ONE_STATEMENT_MAX, SNAPSHOT_VERSION, SceneRecord
 from service.store.projection import rebuild_scene
-from service.store.queue import (
+from service.store.queue_records import (
     Admission,
     BatchRecord,
     Claim,
