@@ -36,6 +36,7 @@ from typing import Any
 import sqlalchemy as sa
 
 from bench.perf_common import write_results
+from bench.service_fleet import fresh_schema
 from core.params import Params
 from service.store.blobs import BlobStore, FileBlobStore, PgBlobStore
 from service.store.engine import make_engine, migrate, write_transaction
@@ -94,7 +95,7 @@ def backends(postgres_url: str, folder: Path) -> Iterator[list[Backend]]:
             )
         ]
         for name in ("postgres+folder", "postgres+table", "postgres+table-pglz"):
-            schema = stack.enter_context(postgres_schema(postgres_url))
+            schema = stack.enter_context(fresh_schema(postgres_url, "pbdag_blob_bench"))
             engine = make_engine(postgres_url, connect_args={"options": f"-csearch_path={schema}"})
             blobs: BlobStore = (
                 FileBlobStore(folder / f"{name}-blobs")
@@ -110,21 +111,6 @@ def backends(postgres_url: str, folder: Path) -> Iterator[list[Backend]]:
                 "ALTER TABLE blobs ALTER COLUMN content SET STORAGE EXTENDED"
             )
         yield built
-
-
-@contextmanager
-def postgres_schema(url: str) -> Iterator[str]:
-    """A fresh schema, dropped afterwards."""
-    schema = f"pbdag_blob_bench_{uuid.uuid4().hex[:8]}"
-    admin = sa.create_engine(url)
-    with admin.begin() as connection:
-        connection.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
-    try:
-        yield schema
-    finally:
-        with admin.begin() as connection:
-            connection.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
-        admin.dispose()
 
 
 def new_scene(backend: Backend) -> str:

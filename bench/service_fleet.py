@@ -101,16 +101,23 @@ def wait_answers(
 
 
 @contextmanager
-def postgres_schema(url: str) -> Iterator[str]:
-    """A fresh schema on the server, dropped afterwards: the service's URL into it."""
-    schema = f"pbdag_service_bench_{uuid.uuid4().hex[:8]}"
+def fresh_schema(url: str, prefix: str) -> Iterator[str]:
+    """A fresh schema on the server, dropped afterwards: its name."""
+    schema = f"{prefix}_{uuid.uuid4().hex[:8]}"
     admin = sa.create_engine(url)
     with admin.begin() as connection:
         connection.execute(sa.text(f'CREATE SCHEMA "{schema}"'))
     try:
-        separator = "&" if "?" in url else "?"
-        yield f"{url}{separator}options=-csearch_path%3D{schema}"
+        yield schema
     finally:
         with admin.begin() as connection:
             connection.execute(sa.text(f'DROP SCHEMA "{schema}" CASCADE'))
         admin.dispose()
+
+
+@contextmanager
+def postgres_schema(url: str) -> Iterator[str]:
+    """A fresh schema on the server, dropped afterwards: the service's URL into it."""
+    with fresh_schema(url, "pbdag_service_bench") as schema:
+        separator = "&" if "?" in url else "?"
+        yield f"{url}{separator}options=-csearch_path%3D{schema}"

@@ -347,6 +347,16 @@ def eligible_distance(
     return None
 
 
+def absorbs(track: FixtureTrackView, proposal: FixtureProposal, params: FixtureParams) -> bool:
+    """A residual proposal of a compatible class lies (mostly) inside the matched track's
+    expanded footprint."""
+    box = proposal.footprint
+    grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
+    return compatible(track.label, proposal, params) and overlap_area(
+        box, grown
+    ) >= params.residual_containment * area(box)
+
+
 def associate_fixtures(
     proposals: Sequence[FixtureProposal], tracks: Sequence[FixtureTrackView], params: FixtureParams
 ) -> tuple[dict[int, str], dict[int, str]]:
@@ -403,15 +413,9 @@ def associate_fixtures(
         if j in matches:
             continue
         proposal = proposals[j]
-        box = proposal.footprint
         for k in np.flatnonzero(meets[j]).tolist():
-            track = matched[k]
-            track_id = track.track_id
-            grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
-            if compatible(track.label, proposal, params) and overlap_area(
-                box, grown
-            ) >= params.residual_containment * area(box):
-                absorbed[j] = track_id
+            if absorbs(matched[k], proposal, params):
+                absorbed[j] = matched[k].track_id
                 break
     return matches, absorbed
 

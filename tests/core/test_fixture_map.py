@@ -13,15 +13,12 @@ from core.fixtures import (
     FixtureProposal,
     FixtureTrackView,
     VoxelEvidence,
-    area,
+    absorbs,
     associate_fixtures,
-    compatible,
     eligible_distance,
     fixture_proposals,
-    footprint_of,
     kept_voxels,
     merged_voxels,
-    overlap_area,
 )
 from core.masks import Mask
 from core.params import FixtureParams
@@ -217,13 +214,8 @@ def associate_one_by_one(
     for j, proposal in enumerate(proposals):
         if j in matches:
             continue
-        box = proposal.footprint
         for track_id in sorted(used):
-            track = by_id[track_id]
-            grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
-            if compatible(track.label, proposal, params) and overlap_area(
-                box, grown
-            ) >= params.residual_containment * area(box):
+            if absorbs(by_id[track_id], proposal, params):
                 absorbed[j] = track_id
                 break
     return matches, absorbed
