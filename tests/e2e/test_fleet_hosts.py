@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
+import threading
 import time
 from pathlib import Path
 
@@ -68,18 +69,28 @@ def test_api_and_two_workers_on_three_hosts_share_only_postgres(
                 for i in range(SCENES)
             ]
             posted: dict[str, set[str]] = {scene: set() for scene in scenes}
-            for i in range(BATCHES):
-                scene = scenes[i % SCENES]
-                body = batch(f"b{i:02d}", i // SCENES, mug=(i // SCENES) % 10 < 6)
-                response = http.post(f"/v1/scenes/{scene}/batches", json=body)
-                assert response.status_code == 202, response.text
-                posted[scene].add(body["batch_id"])
+            answers: list[httpx.Response] = []
 
-            # SIGKILL the victim while it holds a batch: its lease must expire and the batch
-            # be done by the survivor, once.
-            held = wait_for_batch_held_by(engine, victim.pid, timeout=60)
-            victim.send_signal(signal.SIGKILL)
-            victim.wait()
+            def post_all() -> None:
+                with httpx.Client(base_url=base_url, timeout=30.0) as poster:
+                    for i in range(BATCHES):
+                        scene = scenes[i % SCENES]
+                        body = batch(f"b{i:02d}", i // SCENES, mug=(i // SCENES) % 10 < 6)
+                        answers.append(poster.post(f"/v1/scenes/{scene}/batches", json=body))
+                        posted[scene].add(body["batch_id"])
+
+            # Post while watching: the workers may drain the queue as fast as it fills. SIGKILL
+            # the victim while it holds a batch: its lease must expire and the batch be done by
+            # the survivor, once.
+            poster = threading.Thread(target=post_all)
+            poster.start()
+            try:
+                held = wait_for_batch_held_by(engine, victim.pid, timeout=60)
+                victim.send_signal(signal.SIGKILL)
+                victim.wait()
+            finally:
+                poster.join()
+            assert [r.status_code for r in answers] == [202] * BATCHES, answers[-1].text
             statuses = wait_until_settled(http, posted, timeout=120, log=log)
             assert set(statuses.values()) == {"done"}, statuses
             report = FaultReport(backend="postgres")
