@@ -225,4 +225,13 @@ def _piece_of(
         return False
     low = np.minimum(piece.center - piece.extent / 2, whole.center - whole.extent / 2)
     high = np.maximum(piece.center + piece.extent / 2, whole.center + whole.extent / 2)
-    return bool(np.all(high - low <= params.fragment_max_growth * size))
+    return bool(np.all(high - low <= params.fragment_max_growth * upright_size(size)))
+
+
+def upright_size(size: FloatArray) -> FloatArray:
+    """An object's size as the fragment rule bounds it: its larger horizontal side on both
+    horizontal axes, its height on z. Objects rest upright but turn freely about the vertical,
+    and one view shows only part of the side that faces away: a box seen end-on has a narrow
+    stored box along its long side."""
+    horizontal = max(float(size[0]), float(size[1]))
+    return np.array([horizontal, horizontal, float(size[2])])

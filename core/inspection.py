@@ -11,7 +11,7 @@ from typing import Literal
 
 import numpy as np
 
-from core.association import associate
+from core.association import associate, fragments
 from core.batch_evidence import BatchEvidence
 from core.decide import ground_frame
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
@@ -144,10 +144,15 @@ def _attach_children(
     evidence = BatchEvidence(state, params)
     chosen = [proposals[i] for i in kept]
     matches = associate(chosen, evidence.pool(), params.association)
+    # A piece of an object another proposal of the view shows (an over-segmented mask) is not a
+    # second child, as in the frame-level front end.
+    pieces = fragments(chosen, matches, evidence.extent_of, params.association)
     events: list[Event] = []
     children: list[str] = []
     next_number = state.next_track_number
     for j, proposal in enumerate(chosen):
+        if j in pieces:
+            continue
         parents = [fixture.track_id]
         track_id = matches.get(j)
         if track_id is not None and state.tracks[track_id].kind == "object":

@@ -92,6 +92,8 @@ class AssociationParams:
     # proposal of a compatible class whose box, joined with the box of a proposal matched in the
     # same frame, stays within this factor of the object's size on every axis is a piece of that
     # object, not a new one: two solid objects of that size side by side span at least twice it.
+    # The size is upright: its larger horizontal side on x and y, its height on z (objects turn
+    # about the vertical, and one view shows the far side only in part).
     # 0 switches the rule off (every unmatched proposal is a new hypothesis, as in the paper).
     fragment_max_growth: Annotated[float, Field(ge=0.0, le=10.0)] = 1.5
 

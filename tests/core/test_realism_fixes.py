@@ -11,7 +11,7 @@ from core.events import Event
 from core.evolve import fold
 from core.inspection import decide_inspection
 from core.masks import Mask
-from core.observation import Batch, Detection
+from core.observation import Batch, Detection, Frame
 from core.rules import UpdateRules
 from core.state import SceneState
 from core.visibility import observable, samples_passed
@@ -168,6 +168,39 @@ def test_an_inspected_child_matching_a_hypothesis_is_published() -> None:
     record = events[-1].details()
     assert book.track_id in record["children"]
     assert after.tracks[book.track_id].lifecycle == "confirmed"
+
+
+def split_in_two(view: Frame, label: str) -> Frame:
+    """The frame with the `label` object's mask reported as its left and right halves."""
+    detections = []
+    for d in view.detections:
+        if d.label != label:
+            detections.append(d)
+            continue
+        mask = d.mask.to_array()
+        columns = np.flatnonzero(mask.any(axis=0))
+        middle = int(columns[len(columns) // 2])
+        left, right = mask.copy(), mask.copy()
+        left[:, middle:] = False
+        right[:, :middle] = False
+        detections += [replace(d, mask=Mask.from_array(half)) for half in (left, right)]
+    return replace(view, detections=tuple(detections))
+
+
+def test_an_inspected_object_over_segmented_in_the_primary_view_is_one_child() -> None:
+    world = ROOM.with_object(object_on(TABLE, "book", "book", (0.3, 0.2, 0.05), at=(-0.3, 0.1)))
+    state, _ = run(SceneState(), list(batches(world, TABLE_VIEWS * 2, "b")))
+    (book,) = [t for t in state.tracks.values() if t.label == "book"]
+    table = next(t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table")
+    # Seen whole by keyframes, then split in two by the capture's primary view.
+    view = split_in_two(frame(world, (2.0, 1.2, 1.5), (2.0, 2.0, 0.75), "insp"), "book")
+    assert sum(d.label == "book" for d in view.detections) == 2
+    events = decide_inspection(state, "cap", table.track_id, [view], True)
+    after = fold(state, events)
+    assert book.track_id in events[-1].details()["children"]
+    assert [t.track_id for t in after.tracks.values() if t.label == "book"] == [book.track_id]
+    # (Split at its very first sighting, nothing tells two halves from two books side by side:
+    # see test_an_over_segmented_object_stays_one_track.)
 
 
 def test_a_batch_with_full_frame_masks_is_bounded_by_sampling() -> None:
