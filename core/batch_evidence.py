@@ -15,7 +15,7 @@ import numpy.typing as npt
 
 from core.association import CandidatePool
 from core.belief import class_distribution
-from core.events import Event
+from core.events import Event, TrackReparented
 from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
 from core.observation import Frame
@@ -47,6 +47,7 @@ class BatchEvidence:
     fixtures: dict[str, FixtureProposal] = field(default_factory=dict)
     new_track_ids: list[str] = field(default_factory=list)
     visibility: dict[str, Sighting] = field(default_factory=dict)  # best view of each track
+    merged: dict[str, str] = field(default_factory=dict)  # second fixture track -> its keeper
     last_frame: str = ""
     last_timestamp: float = 0.0
 
@@ -204,7 +205,7 @@ class BatchEvidence:
                 if kind == "fixture"
             }
             surfaces = []
-            for track_id in sorted(fixture_ids | set(self.fixtures)):
+            for track_id in sorted((fixture_ids | set(self.fixtures)) - set(self.merged)):
                 track = self.state.tracks.get(track_id)
                 proposal = self.fixtures.get(track_id)
                 if track is not None and track.verification == "rejected":
@@ -243,6 +244,7 @@ class BatchEvidence:
                 emitted += added_object(track_id, proposals, self._parents(proposals), params)
         stale = set(self._stale_hypotheses())
         concerned = set(self.fixtures) | set(self.observations) | set(self.visibility) | stale
+        concerned -= set(self.merged)
         for track_id in sorted(concerned - set(self.new_track_ids)):
             track = self.state.tracks[track_id]
             if track_id in self.fixtures:
@@ -265,7 +267,34 @@ class BatchEvidence:
                 emitted += retired(
                     track, self.last_frame, "removed" if track.lifecycle == "removed" else "unseen"
                 )
-        return emitted
+        return emitted + self._merges(emitted)
+
+    def _merges(self, emitted: list[Event]) -> list[Event]:
+        """Second fixture tracks retire into their keepers; their objects follow, unless this
+        batch already gave them a parent."""
+        events: list[Event] = []
+        reparented = {e.track_id for e in emitted if isinstance(e, TrackReparented)}
+        for track_id, keeper in sorted(self.merged.items()):
+            events += retired(self.state.tracks[track_id], self.last_frame, "merged", keeper)
+            children = (
+                t
+                for t in self.state.tracks.values()
+                if t.parent == track_id
+                and t.kind == "object"
+                and t.lifecycle != "retired"
+                and t.track_id not in reparented
+            )
+            for child in sorted(children, key=lambda t: t.track_id):
+                events.append(
+                    TrackReparented(
+                        track_id=child.track_id,
+                        state=child.lifecycle,
+                        frame_id=self.last_frame,
+                        old_parent=track_id,
+                        new_parent=keeper,
+                    )
+                )
+        return events
 
     def _stale_hypotheses(self) -> list[str]:
         """Hypotheses never published: removed ones, and those unseen for too long (section 3.3:

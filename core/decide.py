@@ -28,6 +28,8 @@ def decide(
         evidence.observe_fixture(track_id, cluster)
     for cluster in fixtures.unexplained:
         evidence.observe_fixture(None, cluster)
+    #    A second track of one fixture, inside a confirmed one's footprint, joins it.
+    evidence.merged = fixtures.merged
     for frame in batch.frames:
         # 2. Grounded observations: back-project each object mask's valid depth (section 3.2).
         proposals = ground_frame(frame, params)

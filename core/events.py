@@ -383,12 +383,14 @@ class TrackRemoved(TrackEvent):
 
 @dataclass(frozen=True, kw_only=True)
 class TrackRetired(TrackEvent):
-    """A hypothesis never published and no longer believed leaves the memory in play for good:
-    removed by visible misses, or unseen for `retire_unseen_hypothesis_s`."""
+    """A track leaves the memory in play for good: a hypothesis never published and no longer
+    believed (removed by visible misses, or unseen for `retire_unseen_hypothesis_s`), or a
+    second track of one fixture, merged into the track that stands for it."""
 
     type: ClassVar[str] = "retire"
-    reason: Literal["removed", "unseen"]
+    reason: Literal["removed", "unseen", "merged"]
     last_observed: float | None
+    merged_into: Annotated[str | None, Omitted] = None  # reason "merged": the track it joined
 
 
 # -- verification, inspection ------------------------------------------------------------------

@@ -10,7 +10,9 @@ from core.fixtures import (
     FixtureTrackView,
     VoxelEvidence,
     associate_fixtures,
+    compatible,
     fixture_proposals,
+    holds,
     kept_voxels,
     merged_voxels,
     voxel_evidence,
@@ -29,6 +31,7 @@ class FixtureBatch:
     observed: dict[str, FixtureProposal] = field(default_factory=dict)  # track id -> proposal
     unexplained: list[FixtureProposal] = field(default_factory=list)  # new hypotheses
     proposals: list[FixtureProposal] = field(default_factory=list)  # every plausible cluster
+    merged: dict[str, str] = field(default_factory=dict)  # second track -> the one it joins
 
 
 def fixture_batch(
@@ -106,4 +109,39 @@ def fixture_batch(
                 result.observed[track_id] = proposal
         elif j not in absorbed and proposal.contributed > 0:
             result.unexplained.append(proposal)
+    if fixture_params.absorb_contained_tracks:
+        result.merged = contained_tracks(state, tracks, matches, proposals, params)
     return result
+
+
+def contained_tracks(
+    state: SceneState,
+    tracks: list[FixtureTrackView],
+    matches: dict[int, str],
+    proposals: list[FixtureProposal],
+    params: Params,
+) -> dict[str, str]:
+    """Second tracks of one fixture: inside the expanded footprint of a confirmed track this
+    batch's cluster matched, of a class that cluster supports; each -> the track it joins."""
+    matched = set(matches.values())
+    merged: dict[str, str] = {}
+    views = {view.track_id: view for view in tracks}
+    for j, keeper_id in sorted(matches.items(), key=lambda item: item[1]):
+        proposal = proposals[j]
+        if proposal.contributed <= 0 or state.tracks[keeper_id].lifecycle != "confirmed":
+            continue
+        keeper = views[keeper_id]
+        for other in tracks:
+            track = state.tracks[other.track_id]
+            if (
+                other.track_id in matched
+                or other.track_id in merged
+                or track.lifecycle not in ("tentative", "confirmed", "demoted")
+                or track.verification == "pending"
+            ):
+                continue
+            if (
+                other.label == keeper.label or compatible(other.label, proposal, params.fixtures)
+            ) and holds(keeper, other, params.fixtures):
+                merged[other.track_id] = keeper_id
+    return merged

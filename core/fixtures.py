@@ -357,6 +357,14 @@ def absorbs(track: FixtureTrackView, proposal: FixtureProposal, params: FixtureP
     ) >= params.residual_containment * area(box)
 
 
+def holds(track: FixtureTrackView, other: FixtureTrackView, params: FixtureParams) -> bool:
+    """`other`'s footprint lies (mostly) inside `track`'s expanded footprint, as a residual
+    cluster the track absorbs does: a second hypothesis of the same fixture."""
+    box = footprint_of(other.center, other.extent)
+    grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
+    return overlap_area(box, grown) >= params.residual_containment * max(area(box), 1e-9)
+
+
 def associate_fixtures(
     proposals: Sequence[FixtureProposal], tracks: Sequence[FixtureTrackView], params: FixtureParams
 ) -> tuple[dict[int, str], dict[int, str]]:

@@ -271,6 +271,14 @@ class FixtureParams:
     min_footprint_iou: Fraction = 0.25
     # A residual cluster this much inside a matched fixture's expanded footprint is absorbed.
     residual_containment: Fraction = 0.9
+    # Not in the paper: a second track of one fixture is absorbed the same way. Seen in parts
+    # first (a shelf end, half a desk), one fixture can make two hypotheses; once a batch's
+    # cluster matches a confirmed track whose expanded footprint holds the other track's
+    # footprint by `residual_containment`, the other one is retired as merged into it (its
+    # objects reparented). Unmatched and in place, it would otherwise take no visible misses
+    # (the depth there shows the fixture's own surface) and stay published. False: the
+    # paper's rule, where such a track stays.
+    absorb_contained_tracks: bool = True
     # Promotion: support from several temporally distinct batches, then the consensus gate.
     confirm_min_batches: Annotated[int, Field(ge=1, le=1000)] = 3
     consensus_min_agreement: Fraction = 0.8  # share of supporting batches whose top class agrees

@@ -282,8 +282,14 @@ def unchanged(track: Track) -> PositiveBatch:
     )
 
 
-def retired(track: Track, frame_id: str, reason: Literal["removed", "unseen"]) -> list[Event]:
-    """A hypothesis never published leaves the memory in play: removed, or unseen too long."""
+def retired(
+    track: Track,
+    frame_id: str,
+    reason: Literal["removed", "unseen", "merged"],
+    merged_into: str | None = None,
+) -> list[Event]:
+    """A track leaves the memory in play: a hypothesis never published, removed or unseen too
+    long, or a second track of a fixture merged into the one that stands for it."""
     return [
         TrackRetired(
             track_id=track.track_id,
@@ -291,6 +297,7 @@ def retired(track: Track, frame_id: str, reason: Literal["removed", "unseen"]) -
             frame_id=frame_id,
             reason=reason,
             last_observed=track.last_observed,
+            merged_into=merged_into,
         )
     ]
 

@@ -176,6 +176,49 @@ def fine_shortfalls(result: RolloutResult) -> list[str]:
     return lines
 
 
+def coarse_shortfalls(result: RolloutResult) -> list[str]:
+    """Every true fixture the final graph missed and every published fixture no true one
+    matched, with the nearest counterpart and the track's state (the coarse traces)."""
+    predicted = [n for n in nodes(result.final_graph) if n.kind == "fixture"]
+    coarse = fixture_scores(result.truth_fixtures, predicted, COARSE_MATCH_M)
+    stands_for = {track: truth for truth, track in coarse.fixture_map.items()}
+    tracks = {t.track_id: t for t in result.final_tracks if t.kind == "fixture"}
+    lines: list[str] = []
+    for truth in result.truth_fixtures:
+        if truth.fixture_id in coarse.fixture_map:
+            continue
+        same = sorted(
+            (math.dist(t.center[:2], truth.center[:2]), t.track_id, t.state)
+            for t in tracks.values()
+            if t.label == truth.label
+        )
+        near = (
+            f"nearest {truth.label} track {same[0][1]} ({same[0][2]}) {same[0][0]:.2f} m away"
+            if same
+            else f"no {truth.label} track"
+        )
+        lines.append(f"missed fixture {truth.fixture_id} ({truth.label}): {near}")
+    for node in predicted:
+        if node.track_id in stands_for:
+            continue
+        nearest = min(
+            result.truth_fixtures,
+            key=lambda truth: math.dist(truth.center[:2], node.center[:2]),
+            default=None,
+        )
+        where = ""
+        if nearest is not None:
+            twin = coarse.fixture_map.get(nearest.fixture_id)
+            where = (
+                f"; nearest true fixture {nearest.fixture_id} ({nearest.label}) "
+                f"{math.dist(nearest.center[:2], node.center[:2]):.2f} m away"
+                + (f", which {twin} stands for" if twin else ", unmatched")
+            )
+        centre = ", ".join(f"{c:.2f}" for c in node.center)
+        lines.append(f"false positive fixture {node.track_id} ({node.label}) at ({centre}){where}")
+    return lines
+
+
 def nodes(graph: Sequence[Node]) -> list[PredictedNode]:
     return [PredictedNode(n.track_id, n.label, n.center, n.parent, n.kind) for n in graph]
 
@@ -245,6 +288,7 @@ def run_row(
             for c in result.captures
         ],
         "fine_shortfalls": fine_shortfalls(result),
+        "coarse_shortfalls": coarse_shortfalls(result),
         "keyframes": len(result.keyframes),
         "path_length_m": result.path_length_m,
         "travel_at_keyframe": [k[2] for k in result.keyframes],

@@ -136,6 +136,15 @@ def text(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int], header: str)
             out.append("")
             out += [f"- {line}" for line in r["fine_shortfalls"]]
             out.append("")
+    out += ["## PBD-AG's coarse shortfalls, with their traces", ""]
+    coarse = [
+        f"- {r['scenario']} seed {r['seed']}: {line}"
+        for r in rows
+        if r["order"] == "pbdag"
+        for line in r.get("coarse_shortfalls", [])
+    ]
+    out += coarse or ["None: every true fixture found, and every published fixture a true one."]
+    out.append("")
     out += ["## Rollouts", ""]
     out += [
         "| world | seed | order | keyframes | inspections (completed) | path [m] | planner ms "

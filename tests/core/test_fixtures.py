@@ -4,17 +4,26 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
+from dataclasses import replace
 
 import numpy as np
 
 from core.decide import decide
-from core.events import Event
+from core.events import Event, FixtureAdded, TrackReparented, TrackRetired
 from core.evolve import fold
 from core.fixtures import FixtureProposal, FixtureTrackView, associate_fixtures, dbscan, kept_voxels
 from core.observation import Batch
 from core.params import FixtureParams
 from core.state import SceneState, Track
-from tests.core.rendered import COUNTER, COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches
+from tests.core.rendered import (
+    COUNTER,
+    COUNTER_VIEWS,
+    ROOM,
+    TABLE,
+    TABLE_VIEWS,
+    batches,
+    object_on,
+)
 
 
 def run(state: SceneState, batch_list: Iterable[Batch]) -> tuple[SceneState, list[Event]]:
@@ -122,3 +131,62 @@ def test_mug_on_the_table_gets_the_table_as_parent_and_carried_to_the_counter_re
     assert reparents[0].details() == {"old_parent": table_id, "new_parent": counter_id}
     assert state.tracks[mug.track_id].parent == counter_id
     assert [t.track_id for t in state.tracks.values() if t.label == "mug"] == [mug.track_id]
+
+
+def with_second_table(state: SceneState, events: list[Event], twin: str) -> SceneState:
+    """The state with a second table track: the first one's hypothesis and publication, made
+    over again 0.3 m from its center and half its size (a part of the table seen first)."""
+    (table,) = [t for t in fixtures_of(state) if t.label == "table"]
+    shift = (table.center[0] + 0.3, table.center[1], table.center[2])
+    copied: list[Event] = []
+    for event in events:
+        if event.track_id != table.track_id or event.type not in ("add", "confirm"):
+            continue
+        if isinstance(event, FixtureAdded):
+            x, y, z = event.observations[0].extent
+            half = (x / 2, y / 2, z / 2)
+            observation = replace(event.observations[0], center=shift, extent=half)
+            event = replace(event, center=shift, observations=(observation,))
+        copied.append(replace(event, track_id=twin))
+    return fold(state, copied)
+
+
+def test_a_second_track_inside_a_confirmed_fixture_is_merged_into_it() -> None:
+    mug = object_on(TABLE, "mug_1", "mug", (0.08, 0.08, 0.1), at=(0.3, 0.0))
+    state, events = run(SceneState(), batches(ROOM.with_object(mug), TABLE_VIEWS * 2, "b"))
+    (table,) = [t for t in fixtures_of(state) if t.label == "table"]
+    twin = "trk-000099"
+    state = with_second_table(state, events, twin)
+    assert state.tracks[twin].lifecycle == "confirmed"
+    (mug_id,) = [t.track_id for t in state.tracks.values() if t.label == "mug"]
+    state = fold(
+        state,
+        [
+            TrackReparented(
+                track_id=mug_id,
+                state="confirmed",
+                frame_id="x",
+                old_parent=table.track_id,
+                new_parent=twin,
+            )
+        ],
+    )
+    # The table seen again: its cluster matches the first track, whose footprint holds the
+    # second; the second retires into it and its mug follows, in the log.
+    after, seen = run(state, batches(ROOM, TABLE_VIEWS[:1], "again"))
+    (merge,) = [e for e in seen if isinstance(e, TrackRetired)]
+    assert (merge.track_id, merge.reason, merge.merged_into) == (twin, "merged", table.track_id)
+    assert after.tracks[twin].lifecycle == "retired"
+    assert after.tracks[mug_id].parent == table.track_id
+    assert [t.track_id for t in fixtures_of(after) if t.lifecycle == "confirmed"] == [
+        f.track_id for f in fixtures_of(state) if f.track_id != twin and f.lifecycle == "confirmed"
+    ]
+    # The paper's rule keeps both.
+    paper = replace(
+        state.params, fixtures=replace(state.params.fixtures, absorb_contained_tracks=False)
+    )
+    assert not [
+        e
+        for e in decide(state, next(iter(batches(ROOM, TABLE_VIEWS[:1], "p"))), paper)
+        if isinstance(e, TrackRetired)
+    ]

@@ -14,15 +14,16 @@ from core.navigation import Navigation
 from core.occupancy import MapGeometry
 from core.plan_ledger import ViewPose
 from core.planner import nearest_frontier, unresolved_fixtures
-from evaluation.active import TruthObject, fine_scores, score_graph
+from evaluation.active import TruthObject, coarse_shortfalls, fine_scores, score_graph
 from evaluation.active_report import at_budget
 from evaluation.predictions import PredictedNode
 from service.app import create_app
 from service.bootstrap import Container
 from service.cli import main
-from sim.memories import InProcessMemory, Node, ServiceMemory
-from sim.rollout import rollout
+from sim.memories import InProcessMemory, Node, ServiceMemory, TrackSummary
+from sim.rollout import RolloutResult, rollout
 from sim.scenario import scenario_from_dict
+from sim.truth import TruthFixture
 from tests.clients import local_pbdag_client
 
 # A 5 m x 4 m room: two fixtures to inspect (a table, a counter), one that is not inspected
@@ -219,3 +220,24 @@ def test_the_cli_writes_table3_and_the_paired_comparison(
     run = document["runs"][0]
     assert run["coarse"]["recall"] == 1.0 and run["stop_reason"].startswith("plan done")
     assert "wrote" in capsys.readouterr().out
+
+
+def test_coarse_shortfalls_name_each_missed_and_each_extra_fixture() -> None:
+    result = RolloutResult("w", 7, "pbdag", False)
+    result.truth_fixtures = (
+        TruthFixture("shelf_1", "shelf", (9.6, 12.0, 0.5), (0.5, 1.4, 1.0)),
+        TruthFixture("desk_1", "desk", (1.5, 0.4, 0.375), (1.4, 0.7, 0.75)),
+    )
+    result.final_graph = [
+        Node("trk-000005", "shelf", "fixture", (9.44, 11.39, 0.68), None),
+        Node("trk-000006", "shelf", "fixture", (9.55, 11.97, 0.5), None),
+    ]
+    result.final_tracks = [
+        TrackSummary(n.track_id, n.label, "fixture", "confirmed", n.center, None, 0)
+        for n in result.final_graph
+    ] + [TrackSummary("trk-000009", "desk", "fixture", "tentative", (1.2, 0.4, 0.4), None, 0)]
+    assert coarse_shortfalls(result) == [
+        "missed fixture desk_1 (desk): nearest desk track trk-000009 (tentative) 0.30 m away",
+        "false positive fixture trk-000005 (shelf) at (9.44, 11.39, 0.68); nearest true fixture "
+        "shelf_1 (shelf) 0.63 m away, which trk-000006 stands for",
+    ]
