@@ -14,7 +14,8 @@ from core.events import BaselineFrozen, Event
 from core.evolve import fold
 from core.state import SceneState, Track
 from service.store.engine import read_transaction, write_transaction
-from service.store.event_log import SNAPSHOT_VERSION, EventLog, encode_snapshot
+from service.store.event_log import EventLog
+from service.store.snapshot_codec import SNAPSHOT_VERSION, encode_snapshot
 from service.store.tables import baselines, snapshots, tracks
 
 

@@ -107,7 +107,7 @@ snapshots = sa.Table(
     sa.Column("scene_id", sa.String(64), sa.ForeignKey("scenes.id"), primary_key=True),
     sa.Column("seq", sa.BigInteger, primary_key=True, autoincrement=False),
     sa.Column("format_version", sa.Integer, nullable=False),
-    sa.Column("body", sa.LargeBinary, nullable=False),  # event_log.encode_snapshot
+    sa.Column("body", sa.LargeBinary, nullable=False),  # snapshot_codec.encode_snapshot
 )
 
 # Projection: frozen baseline packages, canonical JSON named by its sha256 (rebuilt bit for bit).

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from core.evolve import fold
 from core.state import SceneState
-from service.store.event_log import SNAPSHOT_HEADER, decode_snapshot, encode_snapshot
+from service.store.snapshot_codec import SNAPSHOT_HEADER, decode_snapshot, encode_snapshot
 from tests.core.test_replay_properties import live_run, step
 
 

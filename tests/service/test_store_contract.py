@@ -23,7 +23,7 @@ from service.store.errors import (
     SceneNotFound,
     SeqOutOfRange,
 )
-from service.store.event_log import ONE_STATEMENT_MAX, SNAPSHOT_VERSION, SceneRecord
+from service.store.event_log import ONE_STATEMENT_MAX, SceneRecord
 from service.store.projection import rebuild_scene
 from service.store.queue_records import (
     Admission,
@@ -33,6 +33,7 @@ from service.store.queue_records import (
     QueueFull,
     QuotaExceeded,
 )
+from service.store.snapshot_codec import SNAPSHOT_VERSION
 from service.store.tables import snapshots, tracks
 
 
