@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from core.association import CandidatePool
-from core.belief import class_distribution
-from core.events import Event, TrackReparented
+from core.association import CandidatePool, appearance_agrees
+from core.belief import class_compatibility, class_distribution
+from core.events import Event, TrackReparented, TrackRetired
 from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
 from core.observation import Frame
@@ -269,10 +269,60 @@ class BatchEvidence:
                 )
         return emitted + self._merges(emitted)
 
+    def _duplicate_objects(self) -> dict[str, str]:
+        """Second tracks of one object: a live track whose box lies (by volume) inside the box
+        of a track this batch matched, or holds it, of a compatible class and appearance; the
+        younger one -> the older (an unpublished one -> a published one)."""
+        containment = self.params.association.duplicate_containment
+        arrays = self.state.arrays
+        count = len(arrays.track_ids)
+        if containment <= 0 or count < 2:
+            return {}
+        objects = self._live_rows & (np.asarray(self._kinds[:count]) == "object")
+        low = arrays.box_centers - arrays.box_extents / 2
+        high = arrays.box_centers + arrays.box_extents / 2
+        volume = np.maximum(np.prod(arrays.box_extents, axis=1), 1e-12)
+        merged: dict[str, str] = {}
+        for track_id in sorted(self.observations):
+            row = self._row[track_id]
+            if row >= count or not objects[row] or track_id in merged:
+                continue
+            inside = np.prod(
+                np.clip(np.minimum(high, high[row]) - np.maximum(low, low[row]), 0.0, None), axis=1
+            )
+            held = inside >= containment * np.minimum(volume, volume[row])
+            for other in np.flatnonzero(held & objects).tolist():
+                other_id = arrays.track_ids[other]
+                if other == row or other_id in self.observations or other_id in merged:
+                    continue
+                if not self._same_object(row, other):
+                    continue
+                keep, drop = sorted((track_id, other_id))  # ids grow with age
+                if arrays.published[self._row[drop]] and not arrays.published[self._row[keep]]:
+                    keep, drop = drop, keep
+                merged[drop] = keep
+                if drop == track_id:
+                    break
+        return merged
+
+    def _same_object(self, row: int, other: int) -> bool:
+        params = self.params.association
+        compatible = (
+            class_compatibility(self._class_belief_of(row), self._class_belief_of(other))
+            >= params.min_class_compatibility
+        )
+        return compatible and appearance_agrees(
+            self._embedding_of(row), self._embedding_of(other), params.min_appearance_cosine
+        )
+
     def _merges(self, emitted: list[Event]) -> list[Event]:
-        """Second fixture tracks retire into their keepers; their objects follow, unless this
+        """Second tracks retire into their keepers; a fixture's objects follow, unless this
         batch already gave them a parent."""
         events: list[Event] = []
+        gone = {e.track_id for e in emitted if isinstance(e, TrackRetired)}
+        for track_id, keeper in sorted(self._duplicate_objects().items()):
+            if track_id not in gone and keeper not in gone:
+                events += retired(self.state.tracks[track_id], self.last_frame, "merged", keeper)
         reparented = {e.track_id for e in emitted if isinstance(e, TrackReparented)}
         for track_id, keeper in sorted(self.merged.items()):
             events += retired(self.state.tracks[track_id], self.last_frame, "merged", keeper)

@@ -23,12 +23,14 @@ FOREVER = 1.0e12  # an identity memory that only forgets removed tracks
 NO_SIZE_LIMIT = (0.0, 0.0, 0.0, 100.0, 100.0, 100.0)
 # Fixtures published on first sight: no consensus gate, no absorption of residual clusters.
 # Absorption cannot be switched off within the core's parameter ranges (fractions are at most 1);
-# 1.0 absorbs only a residual lying wholly inside a matched fixture's expanded footprint.
+# 1.0 absorbs only a residual lying wholly inside a matched fixture's expanded footprint. A
+# second track of one fixture is not absorbed either (PBD-AG's `absorb_contained_tracks`).
 UNVERIFIED_FIXTURES = {
     "confirm_min_batches": 1,
     "consensus_min_agreement": 0.0,
     "consensus_min_margin": 0.0,
     "residual_containment": 1.0,
+    "absorb_contained_tracks": False,
 }
 
 

@@ -42,7 +42,8 @@ def test_confirm_verdict_weighs_three_and_publishes() -> None:
     assert [e.type for e in events] == ["verify", "confirm"]
     after = fold(state, events).tracks[table.track_id]
     assert after.class_evidence["table"] == table.class_evidence["table"] + 3.0
-    assert after.existence_logodds == min(4.0, table.existence_logodds + 1.8)
+    clamp = state.params.existence.logodds_max
+    assert after.existence_logodds == min(clamp, table.existence_logodds + 1.8)
     assert after.lifecycle == "confirmed" and after.verification == "confirmed"
 
 

@@ -214,7 +214,8 @@ def test_clamp_keeps_a_long_seen_object_removable() -> None:
     assert state.tracks["trk-000001"].existence_logodds == state.params.existence.logodds_max
     state, per_batch = run(state, [scene_batch(f"m{i}", EMPTY) for i in range(15)])
     removal_batch = next(i for i, events in enumerate(per_batch) if "remove" in types(events))
-    assert removal_batch + 1 == 9  # ceil((4 + logit(0.88)) / 0.7)
+    top = state.params.existence.logodds_max
+    assert removal_batch + 1 == math.ceil((top + math.log(0.88 / 0.12)) / 0.7)  # 5 at 1.5
 
 
 def test_mask_with_too_little_valid_depth_is_rejected() -> None:

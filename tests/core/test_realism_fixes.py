@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 
 from core.decide import decide
-from core.events import Event
+from core.events import Event, TrackRetired
 from core.evolve import fold
 from core.inspection import decide_inspection
 from core.masks import Mask
@@ -199,8 +199,8 @@ def test_an_inspected_object_over_segmented_in_the_primary_view_is_one_child() -
     after = fold(state, events)
     assert book.track_id in events[-1].details()["children"]
     assert [t.track_id for t in after.tracks.values() if t.label == "book"] == [book.track_id]
-    # (Split at its very first sighting, nothing tells two halves from two books side by side:
-    # see test_an_over_segmented_object_stays_one_track.)
+    # (Split at its very first sighting, two halves may make two hypotheses: see
+    # test_an_object_split_at_its_first_sighting_becomes_one_track_once_seen_whole.)
 
 
 def test_a_batch_with_full_frame_masks_is_bounded_by_sampling() -> None:
@@ -235,8 +235,8 @@ def test_an_over_segmented_object_stays_one_track() -> None:
     state, _ = run(SceneState(), sequence)
     assert list(state.tracks) == ["trk-000001"]
     assert state.tracks["trk-000001"].lifecycle == "confirmed"
-    # (Split at its very first sighting, nothing tells two halves from two objects side by side:
-    # that makes two hypotheses, as the next test requires.)
+    # (Split at its very first sighting into halves that the fragment rule cannot join, it
+    # makes two hypotheses, merged once seen whole: see the next test.)
     # The rule is a parameter; without it every piece is a new object, as in the paper.
     off = replace(
         state.params,
@@ -244,6 +244,48 @@ def test_an_over_segmented_object_stays_one_track() -> None:
     )
     whole = fold(SceneState(), decide(SceneState(), scene_batch("w0", BIN)))
     assert [e.type for e in decide(whole, split_batch("p0"), off)].count("add") == 1
+
+
+def split_top_bottom(view: Frame, label: str) -> Frame:
+    """The frame with the `label` object's mask reported as its top and bottom halves."""
+    detections = []
+    for d in view.detections:
+        if d.label != label:
+            detections.append(d)
+            continue
+        mask = d.mask.to_array()
+        rows = np.flatnonzero(mask.any(axis=1))
+        middle = int(rows[len(rows) // 2])
+        top, bottom = mask.copy(), mask.copy()
+        top[middle:, :] = False
+        bottom[:middle, :] = False
+        detections += [replace(d, mask=Mask.from_array(half)) for half in (top, bottom)]
+    return replace(view, detections=tuple(detections))
+
+
+def test_an_object_split_at_its_first_sighting_becomes_one_track_once_seen_whole() -> None:
+    bottle = object_on(TABLE, "bottle", "bottle", (0.08, 0.08, 0.3), at=(0.0, 0.0))
+    world = ROOM.with_object(bottle)
+    eye, target = TABLE_VIEWS[0]
+    split = Batch("s0", (split_top_bottom(frame(world, eye, target, "s0-f0"), "bottle"),))
+    state, _ = run(SceneState(), [split])
+    halves = sorted(t.track_id for t in state.tracks.values() if t.label == "bottle")
+    assert len(halves) == 2  # nothing tells two halves from two bottles, one on the other
+    whole = list(batches(world, TABLE_VIEWS * 2, "w"))
+    after, per_batch = run(state, whole)
+    merges = [e for events in per_batch for e in events if isinstance(e, TrackRetired)]
+    assert [(e.track_id, e.reason, e.merged_into) for e in merges] == [
+        (halves[1], "merged", halves[0])
+    ]
+    assert [after.tracks[i].lifecycle for i in halves] == ["confirmed", "retired"]
+    # The rule is a parameter; without it the second half stays a track of its own.
+    paper = replace(
+        state.params, association=replace(state.params.association, duplicate_containment=0.0)
+    )
+    kept = state
+    for batch in whole:
+        kept = fold(kept, decide(kept, batch, paper))
+    assert [kept.tracks[i].lifecycle for i in halves] == ["confirmed", "confirmed"]
 
 
 def test_two_objects_side_by_side_are_not_taken_for_pieces_of_one() -> None:
