@@ -170,20 +170,23 @@ def test_an_inspected_child_matching_a_hypothesis_is_published() -> None:
     assert after.tracks[book.track_id].lifecycle == "confirmed"
 
 
-def split_in_two(view: Frame, label: str) -> Frame:
-    """The frame with the `label` object's mask reported as its left and right halves."""
+def split_in_two(view: Frame, label: str, axis: int = 0) -> Frame:
+    """The frame with the `label` object's mask reported as two halves: left and right (axis
+    0, split across columns) or top and bottom (axis 1, across rows)."""
     detections = []
     for d in view.detections:
         if d.label != label:
             detections.append(d)
             continue
         mask = d.mask.to_array()
-        columns = np.flatnonzero(mask.any(axis=0))
-        middle = int(columns[len(columns) // 2])
-        left, right = mask.copy(), mask.copy()
-        left[:, middle:] = False
-        right[:, :middle] = False
-        detections += [replace(d, mask=Mask.from_array(half)) for half in (left, right)]
+        lines = np.flatnonzero(mask.any(axis=axis))
+        middle = int(lines[len(lines) // 2])
+        first, second = mask.copy(), mask.copy()
+        if axis == 0:
+            first[:, middle:], second[:, :middle] = False, False
+        else:
+            first[middle:, :], second[:middle, :] = False, False
+        detections += [replace(d, mask=Mask.from_array(half)) for half in (first, second)]
     return replace(view, detections=tuple(detections))
 
 
@@ -246,28 +249,11 @@ def test_an_over_segmented_object_stays_one_track() -> None:
     assert [e.type for e in decide(whole, split_batch("p0"), off)].count("add") == 1
 
 
-def split_top_bottom(view: Frame, label: str) -> Frame:
-    """The frame with the `label` object's mask reported as its top and bottom halves."""
-    detections = []
-    for d in view.detections:
-        if d.label != label:
-            detections.append(d)
-            continue
-        mask = d.mask.to_array()
-        rows = np.flatnonzero(mask.any(axis=1))
-        middle = int(rows[len(rows) // 2])
-        top, bottom = mask.copy(), mask.copy()
-        top[middle:, :] = False
-        bottom[:middle, :] = False
-        detections += [replace(d, mask=Mask.from_array(half)) for half in (top, bottom)]
-    return replace(view, detections=tuple(detections))
-
-
 def test_an_object_split_at_its_first_sighting_becomes_one_track_once_seen_whole() -> None:
     bottle = object_on(TABLE, "bottle", "bottle", (0.08, 0.08, 0.3), at=(0.0, 0.0))
     world = ROOM.with_object(bottle)
     eye, target = TABLE_VIEWS[0]
-    split = Batch("s0", (split_top_bottom(frame(world, eye, target, "s0-f0"), "bottle"),))
+    split = Batch("s0", (split_in_two(frame(world, eye, target, "s0-f0"), "bottle", axis=1),))
     state, _ = run(SceneState(), [split])
     halves = sorted(t.track_id for t in state.tracks.values() if t.label == "bottle")
     assert len(halves) == 2  # nothing tells two halves from two bottles, one on the other
