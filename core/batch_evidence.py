@@ -279,6 +279,8 @@ class BatchEvidence:
         if containment <= 0 or count < 2:
             return {}
         objects = self._live_rows & (np.asarray(self._kinds[:count]) == "object")
+        if self._eligible is not None:  # a track association may not match is not one either
+            objects &= self._eligible
         low = arrays.box_centers - arrays.box_extents / 2
         high = arrays.box_centers + arrays.box_extents / 2
         volume = np.maximum(np.prod(arrays.box_extents, axis=1), 1e-12)

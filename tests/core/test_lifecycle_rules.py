@@ -311,6 +311,12 @@ def test_without_persistent_identity_a_returning_object_gets_a_new_identity() ->
     assert (events[0].type, events[0].track_id) == ("add", "trk-000002")
     # The old track takes no miss: the depth shows something at its place (the returned mug).
     assert events[1:] == []
+    # Seen again, the new track is not merged back into the old one: a track the association
+    # may no longer match does not take a second track either.
+    state = fold(state, decide(state, at_time(scene_batch("back", MUG), 5.0), rules=rules))
+    again = decide(state, at_time(scene_batch("again", MUG), 5.5), rules=rules)
+    assert [e.type for e in track_events(again)] == ["update", "confirm"]
+    assert all(e.track_id == "trk-000002" for e in track_events(again))
     # with the paper's rules the same return keeps the identity
     kept = track_events(decide(state, at_time(scene_batch("back", MUG), 5.0)))
     assert kept[0].track_id == "trk-000001"
