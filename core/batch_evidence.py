@@ -270,29 +270,25 @@ class BatchEvidence:
         return emitted + self._merges(emitted)
 
     def _duplicate_objects(self) -> dict[str, str]:
-        """Second tracks of one object: a live track whose box lies (by volume) inside the box
-        of a track this batch matched, or holds it, of a compatible class and appearance; the
-        younger one -> the older (an unpublished one -> a published one)."""
-        containment = self.params.association.duplicate_containment
+        """Second tracks of one object: a live track whose center lies inside the object box
+        (center and extent) of a track this batch matched, or whose box holds that track's
+        center, of a compatible class and appearance, neither one missing; the younger one ->
+        the older (an unpublished one -> a published one)."""
         arrays = self.state.arrays
         count = len(arrays.track_ids)
-        if containment <= 0 or count < 2:
+        if not self.params.association.absorb_contained_tracks or count < 2:
             return {}
-        objects = self._live_rows & (np.asarray(self._kinds[:count]) == "object")
+        objects = self._live_rows & ~arrays.missing & (np.asarray(self._kinds[:count]) == "object")
         if self._eligible is not None:  # a track association may not match is not one either
             objects &= self._eligible
-        low = arrays.box_centers - arrays.box_extents / 2
-        high = arrays.box_centers + arrays.box_extents / 2
-        volume = np.maximum(np.prod(arrays.box_extents, axis=1), 1e-12)
+        half = arrays.extents / 2
         merged: dict[str, str] = {}
         for track_id in sorted(self.observations):
             row = self._row[track_id]
             if row >= count or not objects[row] or track_id in merged:
                 continue
-            inside = np.prod(
-                np.clip(np.minimum(high, high[row]) - np.maximum(low, low[row]), 0.0, None), axis=1
-            )
-            held = inside >= containment * np.minimum(volume, volume[row])
+            gap = np.abs(arrays.centers - arrays.centers[row])
+            held = np.all(gap <= half[row], axis=1) | np.all(gap <= half, axis=1)
             for other in np.flatnonzero(held & objects).tolist():
                 other_id = arrays.track_ids[other]
                 if other == row or other_id in self.observations or other_id in merged:

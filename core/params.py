@@ -98,12 +98,14 @@ class AssociationParams:
     fragment_max_growth: Annotated[float, Field(ge=0.0, le=10.0)] = 1.5
     # Not in the paper: split at its first sighting, one object makes two hypotheses that
     # nothing tells from two objects side by side. Once a batch matches one of them and the
-    # other's box lies this much (by volume) inside the matched one's box (the union of its
-    # views), with a compatible class and agreeing appearance, they are one object: the younger
-    # track retires as merged into the older (an unpublished one into a published one). Left,
-    # the second track stays published, since the depth at its place shows the object's own
-    # surface and it takes no visible misses. 0 switches the rule off (the paper's).
-    duplicate_containment: Fraction = 0.9
+    # other's center lies inside its object box (its center and extent; or the other's box
+    # holds its center), with a compatible class and agreeing appearance, neither demoted nor
+    # removed, they are one object: the younger track retires as merged into the older (an
+    # unpublished one into a published one). Left, the second track stays published, since the
+    # depth at its place shows the object's own surface and it takes no visible misses. (The
+    # box the visibility gate samples, the union of every view, is not used: it grows with
+    # bleeding masks and would take in a neighbour.) False: the paper's rule.
+    absorb_contained_tracks: bool = True
 
 
 # The log-odds clamp may not exceed this: logistic() of it is still distinguishable from 1.

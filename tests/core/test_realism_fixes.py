@@ -266,7 +266,7 @@ def test_an_object_split_at_its_first_sighting_becomes_one_track_once_seen_whole
     assert [after.tracks[i].lifecycle for i in halves] == ["confirmed", "retired"]
     # The rule is a parameter; without it the second half stays a track of its own.
     paper = replace(
-        state.params, association=replace(state.params.association, duplicate_containment=0.0)
+        state.params, association=replace(state.params.association, absorb_contained_tracks=False)
     )
     kept = state
     for batch in whole:
