@@ -127,7 +127,9 @@ def test_waiting_polls_through_rate_limits_and_times_out() -> None:
 
     with answering(service) as client, pytest.raises(BatchTimeout) as raised:
         client.wait_for_batch("s1", "b1", timeout=0.05, poll_interval=0.01)
-    assert raised.value.batch.status == "queued" and len(seen) >= 3
+    # Polled through the 429 (the first answer) to a queued status at least once; how many
+    # polls fit in the timeout depends on the machine's load, not on the client.
+    assert raised.value.batch.status == "queued" and len(seen) >= 2
     assert set(seen) == {"/v1/scenes/s1/batches/b1"}
 
 
