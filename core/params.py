@@ -131,8 +131,8 @@ class ExistenceParams:
     # the depth shows the place empty (a miss counts only then, see VisibilityParams). A top of
     # 4 (p 0.982) needed 9 misses, in practice a second visit to the place; measured side by
     # side on the realistic streams (evaluation/README.md): events reflected within 10 batches
-    # 33/60 -> 42/60, IDF1 .900 -> .911, identity-agnostic false absence .033 -> .037 (objects
-    # moved 0.5 m whose old node, kept longer, had stood within 0.5 m of the new place). The
+    # 33/60 -> 42/60, IDF1 .900 -> .911, identity-agnostic false absence .033 -> .037 (mostly
+    # moved objects whose old node, kept longer, had stood within 0.5 m of them). The
     # bottom must lie under logit(0.12) = -1.99 for removal to be reachable: at -4 (p 0.018) a
     # removed object is confirmed again after 5 positive batches.
     logodds_min: Annotated[float, Field(ge=-MAX_LOGODDS, le=MAX_LOGODDS)] = -4.0
