@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 from evaluation.metrics import present_objects, published_objects, ratio, squared_distance
 from evaluation.predictions import FramePrediction, MethodEvent
-from sim.truth import FrameTruth, ScheduledEvent
+from sim.truth import FrameTruth, ScheduledEvent, Vec3
 
 # The method event that shows a scheduled change was noticed, per scheduled event type.
 RECALLING_EVENT_TYPE = {
@@ -177,19 +177,29 @@ def class_false_absence(
 
     An object is covered at a frame when some published object node has its label and a center
     at most `max_distance` from its center. A checkpoint (object, frame) is eligible when the
-    object is present and was covered at some strictly earlier frame (the memory had acquired
-    it, wherever it was then); it is absent when the object is not covered. rate = absent /
-    eligible (0.0 when nothing is eligible).
+    object is present and was covered at some strictly earlier frame since it last changed
+    place (the memory had acquired it where it stands); it is absent when the object is not
+    covered. rate = absent / eligible (0.0 when nothing is eligible).
+
+    Acquisition restarts when an object is moved: until the memory has found it at its new
+    place, that it does not hold it there is the latency of the move (event recall), not the
+    loss of something it had. This is the paper's measure: a memory that never removes anything
+    (Append-only) has no false absence by construction (Table 2, dagger).
     """
     _check_aligned(truth, predictions)
     max_squared = max_distance**2
     acquired: set[str] = set()
+    place: dict[str, Vec3] = {}
     absent = eligible = 0
     by_object: Counter[str] = Counter()
     for frame_truth, frame_prediction in zip(truth, predictions, strict=True):
         nodes = published_objects(frame_prediction)
         covered_now = set()
         for truth_object in present_objects(frame_truth):
+            before = place.get(truth_object.object_id)
+            if before is not None and squared_distance(before, truth_object.center) > 0.0:
+                acquired.discard(truth_object.object_id)  # moved: acquired anew where it is
+            place[truth_object.object_id] = truth_object.center
             covered = any(
                 node.label == truth_object.label
                 and squared_distance(node.center, truth_object.center) <= max_squared

@@ -302,6 +302,25 @@ def test_class_false_absence_asks_for_any_node_of_the_class_within_half_a_metre(
     assert result.by_object == {"mug": 2, "cup": 2}
 
 
+def test_class_false_absence_acquires_a_moved_object_anew_at_its_new_place() -> None:
+    # The mug stands at the origin (frames 0-1), then is carried 3 m away (frames 2-5).
+    # A memory that never removes keeps its node at the origin throughout and adds one at the
+    # new place at frame 4. Frames 2-4: not acquired where it stands (the move's latency, not a
+    # loss) -> not eligible; frame 5: acquired at frame 4 and covered -> eligible, present.
+    # A memory that drops the new node at frame 5 has that one checkpoint absent.
+    mug, moved = truth_object("mug"), truth_object("mug", FAR)
+    truth = truth_frames([mug], [mug], [moved], [moved], [moved], [moved])
+    kept = [node("n1")]
+    both = [node("n1"), node("n2", FAR)]
+    never_removes = prediction_frames(kept, kept, kept, kept, both, both)
+    result = class_false_absence(truth, never_removes)
+    assert (result.absent, result.eligible) == (0, 2)  # frame 1 (at the origin) and frame 5
+    drops = prediction_frames(kept, kept, kept, kept, both, kept)
+    result = class_false_absence(truth, drops)
+    assert (result.absent, result.eligible) == (1, 2)
+    assert result.by_object == {"mug": 1}
+
+
 def test_false_absence_with_nothing_eligible_is_zero() -> None:
     truth = truth_frames([truth_object("mug")], [truth_object("mug")])
     predictions = prediction_frames([], [node("t1")])
