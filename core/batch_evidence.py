@@ -28,6 +28,7 @@ from core.transitions import (
     added_object,
     observed_fixture,
     observed_object,
+    reidentified_object,
     retired,
     visible_miss,
 )
@@ -74,15 +75,9 @@ class BatchEvidence:
         eligible = None
         if self._eligible is not None:
             eligible = np.concatenate((self._eligible, np.ones(extra, dtype=np.bool_)))
-        # Absence established: removed or demoted, or its place seen empty in enough batches
-        # (this one counting once when it showed the place and no proposal matched the track).
-        seen_empty = np.zeros(len(arrays.track_ids), dtype=np.int64)
-        for track_id, sighting in self.visibility.items():
-            if track_id not in self.observations and observable(sighting, self.params.visibility):
-                seen_empty[self._row[track_id]] = 1
-        misses = arrays.visible_misses + seen_empty
-        absent = arrays.missing | (misses >= self.params.association.fallback_min_misses)
-        recoverable = np.concatenate((arrays.published & absent, np.zeros(extra, dtype=np.bool_)))
+        recoverable = np.concatenate(
+            (arrays.published & self._absent(), np.zeros(extra, dtype=np.bool_))
+        )
         return CandidatePool(
             self._ids,
             self._kinds,
@@ -92,6 +87,20 @@ class BatchEvidence:
             eligible,
             recoverable,
         )
+
+    def _absent(self) -> npt.NDArray[np.bool_]:
+        """Absence established: removed or demoted, or its place seen empty in enough batches
+        (this one counting once when it showed the place and no proposal matched the track)."""
+        arrays = self.state.arrays
+        seen_empty = np.zeros(len(arrays.track_ids), dtype=np.int64)
+        for track_id, sighting in self.visibility.items():
+            if track_id not in self.observations and observable(sighting, self.params.visibility):
+                seen_empty[self._row[track_id]] = 1
+        misses = arrays.visible_misses + seen_empty
+        absent: npt.NDArray[np.bool_] = arrays.missing | (
+            misses >= self.params.association.fallback_min_misses
+        )
+        return absent
 
     def held_by_capture(self, track_id: str) -> bool:
         """A fine node attached through the capture ledger: a frame's proposal it explains is
@@ -244,7 +253,8 @@ class BatchEvidence:
                 emitted += added_object(track_id, proposals, self._parents(proposals), params)
         stale = set(self._stale_hypotheses())
         concerned = set(self.fixtures) | set(self.observations) | set(self.visibility) | stale
-        concerned -= set(self.merged)
+        reidentified = self._reidentifications()
+        concerned -= set(self.merged) | set(reidentified) | {h for h, _ in reidentified.values()}
         for track_id in sorted(concerned - set(self.new_track_ids)):
             track = self.state.tracks[track_id]
             if track_id in self.fixtures:
@@ -267,7 +277,68 @@ class BatchEvidence:
                 emitted += retired(
                     track, self.last_frame, "removed" if track.lifecycle == "removed" else "unseen"
                 )
-        return emitted + self._merges(emitted)
+        for track_id, (hypothesis, cosine) in sorted(reidentified.items()):
+            emitted += reidentified_object(
+                self.state.tracks[track_id],
+                self.state.tracks[hypothesis],
+                cosine,
+                self.last_frame,
+                params,
+            )
+            emitted += retired(self.state.tracks[hypothesis], self.last_frame, "merged", track_id)
+        return emitted + self._merges(emitted, set(reidentified))
+
+    def _reidentifications(self) -> dict[str, tuple[str, float]]:
+        """Missing objects that are hypotheses seen since elsewhere: object -> (hypothesis,
+        appearance cosine).
+
+        The object: published, its absence established (`_absent`), not matched in this batch.
+        The hypothesis: an object track never published, not matched in this batch, last seen
+        after the object was. Their classes are compatible, and each is the other's best
+        appearance match past the gate, by the fallback margin over every other candidate on
+        either side (a mug carried among mugs keeps its identity; a mug still in place lends
+        none). The work is bounded by the live hypotheses, which retire when unseen.
+        """
+        params = self.params.association
+        if not (params.unique_class_fallback and params.reidentify_hypotheses):
+            return {}
+        arrays = self.state.arrays
+        count = len(arrays.track_ids)
+        objects = (np.asarray(self._kinds[:count]) == "object") & ~arrays.captured
+        if self._eligible is not None:
+            objects &= self._eligible
+        for track_id in self.observations:
+            row = self._row[track_id]
+            if row < count:
+                objects[row] = False
+        hypotheses = np.flatnonzero(objects & arrays.unpublished_tentative & ~arrays.gone)
+        if hypotheses.size == 0:
+            return {}
+        missing = np.flatnonzero(objects & arrays.published & self._absent())
+        scores = np.full((hypotheses.size, missing.size), -1.0)
+        for i, h in enumerate(hypotheses.tolist()):
+            embedding = self._embedding_of(h)
+            if embedding is None:
+                continue
+            for j, m in enumerate(missing.tolist()):
+                other = self._embedding_of(m)
+                if (
+                    other is None
+                    or other.shape != embedding.shape
+                    or not arrays.last_observed[m] < arrays.last_observed[h]
+                    or class_compatibility(self._class_belief_of(h), self._class_belief_of(m))
+                    < params.min_class_compatibility
+                ):
+                    continue
+                scores[i, j] = float(embedding @ other)
+        found: dict[str, tuple[str, float]] = {}
+        for i, j in zip(*np.nonzero(scores > params.min_appearance_cosine), strict=True):
+            best = scores[i, j]
+            rivals = np.concatenate((np.delete(scores[i], j), np.delete(scores[:, j], i)))
+            if rivals.size and best - rivals.max() < params.fallback_margin:
+                continue
+            found[arrays.track_ids[missing[j]]] = (arrays.track_ids[hypotheses[i]], float(best))
+        return found
 
     def _duplicate_objects(self) -> dict[str, str]:
         """Second tracks of one object: a live track whose center lies inside the object box
@@ -313,11 +384,12 @@ class BatchEvidence:
             self._embedding_of(row), self._embedding_of(other), params.min_appearance_cosine
         )
 
-    def _merges(self, emitted: list[Event]) -> list[Event]:
+    def _merges(self, emitted: list[Event], busy: set[str]) -> list[Event]:
         """Second tracks retire into their keepers; a fixture's objects follow, unless this
-        batch already gave them a parent."""
+        batch already gave them a parent. Tracks re-identified in this batch (`busy`) are left
+        alone."""
         events: list[Event] = []
-        gone = {e.track_id for e in emitted if isinstance(e, TrackRetired)}
+        gone = {e.track_id for e in emitted if isinstance(e, TrackRetired)} | busy
         for track_id, keeper in sorted(self._duplicate_objects().items()):
             if track_id not in gone and keeper not in gone:
                 events += retired(self.state.tracks[track_id], self.last_frame, "merged", keeper)

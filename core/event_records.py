@@ -25,6 +25,7 @@ from core.events import (
     InspectionTargeted,
     ObjectAdded,
     ObjectObserved,
+    ObjectReidentified,
     OccupancyEvidence,
     SceneCreated,
     TrackConfirmed,
@@ -91,6 +92,8 @@ def event_class(type_name: str, details: Mapping[str, Any]) -> type[Event]:
     if type_name == "update":
         if details.get("evidence") == "visible_miss":
             return VisibleMiss
+        if details.get("evidence") == "reidentified":
+            return ObjectReidentified
         return FixtureObserved if "center" in details else ObjectObserved
     cls = _SINGLE_CLASS.get(type_name)
     if cls is None:

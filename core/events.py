@@ -33,6 +33,7 @@ __all__ = [
     "LifecycleState",
     "ObjectAdded",
     "ObjectObserved",
+    "ObjectReidentified",
     "Observation",
     "OccupancyEvidence",
     "SceneCreated",
@@ -315,6 +316,36 @@ class FixtureObserved(TrackObserved):
     batches_observed: int
     reacquired: bool
     timestamp: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class ObjectReidentified(TrackObserved):
+    """A hypothesis seen elsewhere since this object was last seen is this object.
+
+    The unique-class fallback, deferred (section 3.3): a carried object seen at its new place
+    before its old place was seen empty starts a hypothesis, its absence not yet established.
+    Once it is, and appearance singles the pair out, the object takes the hypothesis's place,
+    box, class and appearance evidence and support evidence, and one positive update per batch
+    the hypothesis was seen in (equation (3)); the hypothesis retires, merged into it.
+    """
+
+    evidence: Literal["reidentified"] = "reidentified"
+    hypothesis: str  # the track id of the hypothesis
+    appearance_cosine: float
+    seen_in: str | None  # the hypothesis's last observation (frame id)
+    timestamp: float  # ... and its time
+    center: Vec3
+    extent: Vec3
+    box: tuple[float, ...]  # (low x, y, z, high x, y, z), the hypothesis's
+    recent_centers: tuple[Vec3, ...]
+    class_evidence: Mapping[str, float]  # the hypothesis's, added to the object's
+    embedding_sum: tuple[float, ...] | None  # ... likewise
+    embedding_count: int
+    existence_logodds: float
+    p_exist: float
+    batches_observed: int
+    reacquired: bool  # the object had been removed: it restarts as a hypothesis
+    parent_evidence: Mapping[str, float]  # the hypothesis's (the old support's is stale)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -19,6 +19,7 @@ from core.events import (
     InspectionTargeted,
     ObjectAdded,
     ObjectObserved,
+    ObjectReidentified,
     OccupancyEvidence,
     SceneCreated,
     TrackConfirmed,
@@ -91,6 +92,8 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 tracks[event.track_id] = _observe(_new_track(event), event, params)
             case ObjectObserved() | FixtureObserved():
                 tracks[event.track_id] = _observe(tracks[event.track_id], event, params)
+            case ObjectReidentified():
+                tracks[event.track_id] = _reidentify(tracks[event.track_id], event, params)
             case VisibleMiss():
                 # A visibility-admissible miss: only existence and the miss count change.
                 tracks[event.track_id] = tracks[event.track_id].evolved(
@@ -242,6 +245,38 @@ def _observe(
         last_observed_frame=last.frame_id,
         batches_observed=event.batches_observed,
         visible_misses=misses,
+    )
+
+
+def _reidentify(track: Track, event: ObjectReidentified, params: Params) -> Track:
+    """The object takes the hypothesis's place and evidence (its own class and appearance
+    evidence gain the hypothesis's); its misses at the old place are explained."""
+    class_evidence = dict(track.class_evidence)
+    for label, weight in event.class_evidence.items():
+        class_evidence[label] = class_evidence.get(label, 0.0) + weight
+    embedding_sum = track.embedding_sum
+    if event.embedding_sum is not None:
+        embedding_sum = (
+            event.embedding_sum
+            if embedding_sum is None
+            else tuple(map(operator.add, embedding_sum, event.embedding_sum))
+        )
+    return track.evolved(
+        lifecycle=event.state,
+        center=event.center,
+        extent=event.extent,
+        box=event.box,
+        recent_centers=event.recent_centers[-params.fusion.max_recent_centers :],
+        class_evidence=class_evidence,
+        embedding_sum=embedding_sum,
+        embedding_count=track.embedding_count + event.embedding_count,
+        existence_logodds=event.existence_logodds,
+        last_observed=event.timestamp,
+        last_observed_frame=event.seen_in,
+        batches_observed=event.batches_observed,
+        visible_misses=0,
+        parent_evidence=dict(event.parent_evidence),
+        capture_id=None,
     )
 
 

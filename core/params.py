@@ -88,6 +88,13 @@ class AssociationParams:
     # Only a track whose absence is established lends its identity: removed or demoted, or its
     # place seen empty in this many batches (one miss may be the detector's, not the object's).
     fallback_min_misses: Annotated[int, Field(ge=1, le=1000)] = 2
+    # The fallback, deferred (not in the paper, whose fallback lends an identity at once): a
+    # carried object seen at its new place before its old place was seen empty starts a
+    # hypothesis. Once its absence is established as above, a never-published hypothesis seen
+    # since, of a compatible class, takes the identity back when each is the other's best
+    # appearance match past the gate and by the margin (`ObjectReidentified`). Off with the
+    # fallback.
+    reidentify_hypotheses: bool = True
     # Not in the paper: detectors over-segment (one mug reported as two masks). A second
     # proposal of a compatible class whose box, joined with the box of a proposal matched in the
     # same frame, stays within this factor of the object's size on every axis is a piece of that

@@ -15,6 +15,7 @@ from core.events import (
     FixtureObserved,
     ObjectAdded,
     ObjectObserved,
+    ObjectReidentified,
     Observation,
     TrackConfirmed,
     TrackDemoted,
@@ -241,6 +242,57 @@ def observed_object(
             confirmed(track.track_id, frame_id, positive.p_exist, center, positive.batches)
         )
     emitted.extend(_move_events(track, lifecycle, frame_id, center, params))
+    emitted.extend(_support_events(track.track_id, lifecycle, frame_id, track.parent, evidence))
+    return emitted
+
+
+def reidentified_object(
+    track: Track, hypothesis: Track, cosine: float, frame_id: str, params: Params
+) -> list[Event]:
+    """A missing object is the hypothesis seen since elsewhere: `update` (reidentified), then
+    `confirm`, `move` and `reparent` as they apply, as if the fallback had matched the
+    hypothesis's sightings to the object (one positive update per batch it was seen in)."""
+    reacquired = track.lifecycle == "removed"
+    logodds = params.existence.prior_logodds if reacquired else track.existence_logodds
+    seen = max(1, hypothesis.batches_observed)
+    for _ in range(seen):
+        logodds = update_existence(logodds, params.existence, observed=True)
+    batches = seen + (0 if reacquired else track.batches_observed)
+    lifecycle: LifecycleState = "tentative" if reacquired else track.lifecycle
+    p_exist = logistic(logodds)
+    center = hypothesis.center
+    box = hypothesis.box
+    if box is None:
+        low = np.asarray(center) - np.asarray(hypothesis.extent) / 2
+        box = (*vec3(low), *vec3(low + np.asarray(hypothesis.extent)))
+    emitted: list[Event] = [
+        ObjectReidentified(
+            track_id=track.track_id,
+            state=lifecycle,
+            frame_id=frame_id,
+            hypothesis=hypothesis.track_id,
+            appearance_cosine=cosine,
+            seen_in=hypothesis.last_observed_frame,
+            timestamp=float(hypothesis.last_observed or 0.0),
+            center=center,
+            extent=hypothesis.extent,
+            box=box,
+            recent_centers=hypothesis.recent_centers,
+            class_evidence=dict(sorted(hypothesis.class_evidence.items())),
+            embedding_sum=hypothesis.embedding_sum,
+            embedding_count=hypothesis.embedding_count,
+            existence_logodds=logodds,
+            p_exist=p_exist,
+            batches_observed=batches,
+            reacquired=reacquired,
+            parent_evidence=dict(hypothesis.parent_evidence),
+        )
+    ]
+    if should_confirm("object", lifecycle, p_exist, batches, params):
+        lifecycle = "confirmed"
+        emitted.append(confirmed(track.track_id, frame_id, p_exist, center, batches))
+    emitted.extend(_move_events(track, lifecycle, frame_id, center, params))
+    evidence = hypothesis.parent_evidence
     emitted.extend(_support_events(track.track_id, lifecycle, frame_id, track.parent, evidence))
     return emitted
 

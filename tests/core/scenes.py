@@ -75,6 +75,7 @@ def scene_batch(
     occluders: Iterable[tuple[tuple[float, float, float], float]] = (),
     pose: np.ndarray | None = None,
     embeddings: dict[str, np.ndarray] | None = None,
+    t: float = 0.0,
 ) -> Batch:
     """One-frame batch of a wall with cubes; `detect` names the cubes that get a mask."""
     depth = wall()
@@ -91,7 +92,7 @@ def scene_batch(
     detections = [
         detection(labels[n], masks[n], embeddings.get(n)) for n in sorted(names) if masks[n].any()
     ]
-    return Batch(batch_id, (frame(f"{batch_id}-f0", depth, detections, pose),))
+    return Batch(batch_id, (frame(f"{batch_id}-f0", depth, detections, pose, t),))
 
 
 def track_events(events: Iterable[Event]) -> list[Event]:
