@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -35,7 +36,7 @@ def frame_cells(frame: Frame, params: OccupancyParams) -> tuple[IntArray, IntArr
     rows = np.arange(0, height, stride)
     cols = np.arange(0, width, stride)
     flat_index = (rows[:, None] * width + cols[None, :]).ravel().astype(np.intp)
-    depth = frame.depth.reshape(-1)[flat_index].astype(np.float64)
+    depth = _median_depth(frame.depth, rows, cols, params.depth_median_px)
     valid = np.isfinite(depth) & (depth >= params.min_range_m) & (depth <= params.max_range_m)
     none = np.zeros(0, np.int64)
     if not valid.any():
@@ -59,6 +60,37 @@ def frame_cells(frame: Frame, params: OccupancyParams) -> tuple[IntArray, IntArr
     foot_x, foot_y = _footprint(window.camera, params)
     free = window.cells(np.concatenate((rays_x, foot_x)), np.concatenate((rays_y, foot_y)))
     return np.setdiff1d(free, occupied, assume_unique=True), occupied
+
+
+def _median_depth(
+    depth: npt.NDArray[Any], rows: IntArray, cols: IntArray, window: int
+) -> FloatArray:
+    """The depth at the sampled pixels, each the median of the valid depths in the window
+    around it (a pixel without depth stays without: holes are not filled).
+
+    Axial noise puts a few points of every surface in front of it; each marks its cell occupied,
+    and no free ray clears it (rays stop at the nearest point of their bearing), so over a run
+    the obstacles' boundaries would grow by the noise's extremes (10 cm at 4 m, measured). The
+    median keeps edges where a plain mean would blur them.
+    """
+    height, width = depth.shape
+    centre = depth[rows[:, None], cols[None, :]].astype(np.float64)
+    if window <= 1:
+        return centre.ravel()
+    half = window // 2
+    offsets = np.arange(-half, half + 1)
+    near_rows = np.clip(rows[:, None] + offsets[None, :], 0, height - 1)  # (r, w)
+    near_cols = np.clip(cols[:, None] + offsets[None, :], 0, width - 1)  # (c, w)
+    patch = depth[near_rows[:, None, :, None], near_cols[None, :, None, :]].astype(np.float64)
+    patch = patch.reshape(rows.size, cols.size, window * window)
+    usable = np.isfinite(patch) & (patch > 0)
+    patch[~usable] = np.inf  # sorted last
+    patch.sort(axis=2)
+    middle = np.maximum(usable.sum(axis=2) - 1, 0) // 2  # the lower median of the usable
+    median = np.take_along_axis(patch, middle[..., None], axis=2)[..., 0]
+    has_depth = np.isfinite(centre) & (centre > 0)
+    result: FloatArray = np.where(has_depth, median, centre).ravel()
+    return result
 
 
 def _footprint(camera: FloatArray, params: OccupancyParams) -> tuple[FloatArray, FloatArray]:

@@ -10,6 +10,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from core.decide import decide
+from core.errors import InvalidParams
 from core.events import OccupancyEvidence
 from core.evolve import fold
 from core.navigation import Navigation
@@ -94,6 +95,29 @@ def test_a_wall_seen_over_the_floor_is_occupied_behind_free_space() -> None:
     assert np.all(np.isclose(x, 3.025))
     assert float(np.abs(y).max()) <= half_width + 0.05
     assert len(rows) == pytest.approx(2 * half_width / 0.05, abs=3)
+
+
+def test_depth_noise_in_front_of_a_wall_does_not_grow_it() -> None:
+    # The wall's depth with axial noise: a few pixels read 25 cm short (1 in 50, scattered).
+    depth = wall_and_floor_depth()
+    rng = np.random.default_rng(3)
+    wall = depth >= WALL_X - 1e-3
+    outliers = wall & (rng.random(depth.shape) < 0.02)
+    depth[outliers] -= 0.25
+    noisy = Frame("f0", 0.0, INTRINSICS, level_pose(), depth)
+    # Each sampled depth is a median over 3 x 3 pixels: the wall stays one cell deep.
+    _free, occupied = frame_cells(noisy, PARAMS.occupancy)
+    rows, cols = np.divmod(occupied, GEOMETRY.side)
+    x, _y = GEOMETRY.center_of(rows, cols)
+    assert np.all(np.isclose(x, 3.025))
+    # Raw pixels (window 1) put the outliers' cells in front of it, where no ray clears them.
+    raw = Params.from_dict({"occupancy": {"depth_median_px": 1}}).occupancy
+    _free, occupied = frame_cells(noisy, raw)
+    rows, cols = np.divmod(occupied, GEOMETRY.side)
+    x, _y = GEOMETRY.center_of(rows, cols)
+    assert np.any(x < 2.9)
+    with pytest.raises(InvalidParams, match=r"params\.occupancy: depth_median_px must be odd"):
+        Params.from_dict({"occupancy": {"depth_median_px": 2}})
 
 
 def test_points_outside_the_height_band_are_not_obstacles() -> None:
