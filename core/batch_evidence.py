@@ -369,6 +369,8 @@ class BatchEvidence:
                 keep, drop = sorted((track_id, other_id))  # ids grow with age
                 if arrays.published[self._row[drop]] and not arrays.published[self._row[keep]]:
                     keep, drop = drop, keep
+                if drop in merged.values():
+                    continue  # it keeps another track this batch: no chain of merges
                 merged[drop] = keep
                 if drop == track_id:
                     break

@@ -6,14 +6,18 @@ from dataclasses import replace
 
 import numpy as np
 
+from core.batch_evidence import BatchEvidence
 from core.decide import decide
 from core.events import Event, TrackRetired
 from core.evolve import fold
+from core.geometry import Proposal
 from core.inspection import decide_inspection
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame
+from core.params import Params
 from core.rules import UpdateRules
 from core.state import SceneState
+from core.transitions import added_object, confirmed
 from core.visibility import observable, samples_passed
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 from tests.core.scenes import (
@@ -360,3 +364,33 @@ def test_a_miss_counts_only_where_depth_shows_the_place_empty() -> None:
     occluder = ((0.2, 0.1, 1.5), 0.3)
     hidden = scene_batch("hidden", {}, occluders=[occluder])
     assert track_events(decide(state, hidden)) == []
+
+
+def test_a_track_that_keeps_a_second_track_is_not_merged_away_in_the_same_batch() -> None:
+    # trk-1: a hypothesis; trk-2 and trk-3: published; trk-1 and trk-2 both lie in trk-3's box.
+    # This batch sees trk-1 and trk-2: trk-1 joins the published trk-3, which must then not
+    # join trk-2 as well (trk-1 would be merged into a track that left).
+    params = Params()
+    state = SceneState()
+    for number, x, published in ((1, 0.00, False), (2, 0.10, True), (3, 0.05, True)):
+        proposal = Proposal(
+            label="bin",
+            score=0.9,
+            kind="object",
+            center=np.array([x, 0.0, 2.0]),
+            extent=np.array([0.3, 0.3, 0.3]),
+            embedding=None,
+            valid_pixels=400,
+            frame_id=f"f{number}",
+            timestamp=float(number),
+            bottom_z=1.85,
+        )
+        track_id = f"trk-{number:06d}"
+        events = added_object(track_id, [proposal], [None], params)
+        if published:
+            events.append(confirmed(track_id, f"f{number}", 0.8, (x, 0.0, 2.0), 2))
+        state = fold(state, events)
+    evidence = BatchEvidence(state, params)
+    for track_id in ("trk-000001", "trk-000002"):
+        evidence.observations[track_id] = []
+    assert evidence._duplicate_objects() == {"trk-000001": "trk-000003"}
