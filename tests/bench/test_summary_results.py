@@ -131,6 +131,7 @@ def write_plan(mp: pytest.MonkeyPatch) -> None:
         "bytes_per_batch_median": 1700.0,
         "bytes_per_batch_max": 1900,
         "evidence_ms_per_frame_median": 3.5,
+        "evidence_ms_per_frame_median_raw_depth": 2.9,
     }
     mp.setattr(bench_plan, "planning_state", lambda seed: state)
     mp.setattr(bench_plan, "MapGeometry", SimpleNamespace(of=lambda params: None))
