@@ -170,7 +170,8 @@ def dynamic_text(rows: Sequence[dict[str, Any]]) -> str:
     parts.append(
         "Event R. counts scheduled changes reflected within the scenario's latency bound, from "
         "the first batch the change was observable; False abs. is identity-agnostic (no node of "
-        "the class within 0.5 m), False abs. (identity) conditions on the assigned track.\n"
+        "the class within 0.5 m of an object the memory had found where it stands), False abs. "
+        "(identity) conditions on the assigned track.\n"
     )
     parts.append("## Event latency (every run pooled)\n\n" + latency_section(rows))
     parts.append(f"## Shortfalls of {SUBJECT}, with their traces\n\n" + shortfalls(rows))
