@@ -48,9 +48,17 @@ def appearance_agrees(a: FloatArray | None, b: FloatArray | None, min_cosine: fl
 
 
 def associate(
-    proposals: Sequence[Proposal], pool: CandidatePool, params: AssociationParams
+    proposals: Sequence[Proposal],
+    pool: CandidatePool,
+    params: AssociationParams,
+    pieces_of: Callable[[Mapping[int, str]], set[int]] | None = None,
 ) -> dict[int, str]:
-    """Proposal index -> track id: gated greedy one-to-one, then the unique-class fallback."""
+    """Proposal index -> track id: gated greedy one-to-one, then the unique-class fallback.
+
+    `pieces_of(matches)` names the unmatched proposals that are pieces of an object a matched
+    proposal shows (`fragments`): the fallback lends them no identity, as a second mask of an
+    object already explained is no sighting of a missing one.
+    """
     matches: dict[int, str] = {}
     if not proposals or len(pool.track_ids) == 0:
         return matches
@@ -81,7 +89,8 @@ def associate(
         matches[j] = track_id
         used_tracks.add(track_id)
     if params.unique_class_fallback:
-        matches.update(_fallback(proposals, pool, matches, used_tracks, params))
+        pieces = set() if pieces_of is None else pieces_of(matches)
+        matches.update(_fallback(proposals, pool, matches, used_tracks, pieces, params))
     return matches
 
 
@@ -90,6 +99,7 @@ def _fallback(
     pool: CandidatePool,
     matches: dict[int, str],
     used_tracks: set[str],
+    pieces: set[int],
     params: AssociationParams,
 ) -> dict[int, str]:
     """After large motion: an unmatched proposal recovers a missing track of its class.
@@ -107,7 +117,7 @@ def _fallback(
         if pool.track_ids[int(i)] not in used_tracks
         and (pool.eligible is None or pool.eligible[int(i)])
     ]
-    free = [j for j in range(len(proposals)) if j not in matches]
+    free = [j for j in range(len(proposals)) if j not in matches and j not in pieces]
     recovered: dict[int, str] = {}
     taken: set[int] = set()
     for j in free:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import partial
+
 from core.association import associate, fragments
 from core.batch_evidence import BatchEvidence
 from core.events import Event
@@ -37,9 +39,15 @@ def decide(
         #    unmatched in a frame that showed it is a visible miss (section 3.3).
         evidence.record_visibility(frame)
         # 4. Dynamic association: class compatibility, 3D distance < 0.8 m, appearance > 0.78,
-        #    greedy 1:1, then the unique-class fallback for tracks whose absence is established;
-        #    removed tracks take part (section 3.3).
-        matches = associate(proposals, evidence.pool(), params.association)
+        #    greedy 1:1, then the unique-class fallback for tracks whose absence is established
+        #    (not for a piece of an object a matched proposal shows); removed tracks take part
+        #    (section 3.3).
+        matches = associate(
+            proposals,
+            evidence.pool(),
+            params.association,
+            partial(fragments, proposals, size_of=evidence.extent_of, params=params.association),
+        )
         #    A leftover piece of an object another proposal shows (an over-segmented mask) is
         #    set aside, not taken for a new object.
         pieces = fragments(proposals, matches, evidence.extent_of, params.association)

@@ -7,6 +7,7 @@ show the fixture's support region. They are never fused.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 from typing import Literal
 
 import numpy as np
@@ -143,7 +144,12 @@ def _attach_children(
     ]
     evidence = BatchEvidence(state, params)
     chosen = [proposals[i] for i in kept]
-    matches = associate(chosen, evidence.pool(), params.association)
+    matches = associate(
+        chosen,
+        evidence.pool(),
+        params.association,
+        partial(fragments, chosen, size_of=evidence.extent_of, params=params.association),
+    )
     # A piece of an object another proposal of the view shows (an over-segmented mask) is not a
     # second child, as in the frame-level front end.
     pieces = fragments(chosen, matches, evidence.extent_of, params.association)

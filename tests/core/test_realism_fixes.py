@@ -394,3 +394,17 @@ def test_a_track_that_keeps_a_second_track_is_not_merged_away_in_the_same_batch(
     for track_id in ("trk-000001", "trk-000002"):
         evidence.observations[track_id] = []
     assert evidence._duplicate_objects() == {"trk-000001": "trk-000003"}
+
+
+def test_a_piece_of_a_matched_object_lends_no_identity_to_a_missing_one() -> None:
+    # Two bins; the second is taken away and removed. Then the first is reported as two masks:
+    # one half matches it, and the other, a piece of it, must not recover the removed bin (the
+    # fallback would: one unmatched bin proposal, one missing bin track).
+    both = {**BIN, "bin_2": ((-0.6, 0.1, 1.5), 0.3)}  # 0.94 m from the first: beyond the gate
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", both) for i in range(3)])
+    state, _ = run(state, [scene_batch(f"m{i}", BIN) for i in range(15)])
+    first, second = "trk-000001", "trk-000002"
+    assert state.tracks[second].lifecycle == "removed"
+    state, per_batch = run(state, [split_batch("s0")])
+    assert {e.track_id for e in per_batch[0]} == {first}
+    assert state.tracks[second].lifecycle == "removed" and len(state.tracks) == 2
