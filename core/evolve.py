@@ -207,13 +207,7 @@ def _observe(
         for label, share in class_distribution(observation.label, observation.class_scores).items():
             class_evidence[label] = class_evidence.get(label, 0.0) + weight * share
     centers = track.recent_centers + tuple(o.center for o in observations)
-    embedding_sum = track.embedding_sum
-    if event.embedding_sum is not None:
-        embedding_sum = (
-            event.embedding_sum
-            if embedding_sum is None
-            else tuple(map(operator.add, embedding_sum, event.embedding_sum))
-        )
+    embedding_sum = _summed(track.embedding_sum, event.embedding_sum)
     last = observations[-1]
     misses = 0
     if isinstance(event, FixtureAdded | FixtureObserved):
@@ -254,13 +248,7 @@ def _reidentify(track: Track, event: ObjectReidentified, params: Params) -> Trac
     class_evidence = dict(track.class_evidence)
     for label, weight in event.class_evidence.items():
         class_evidence[label] = class_evidence.get(label, 0.0) + weight
-    embedding_sum = track.embedding_sum
-    if event.embedding_sum is not None:
-        embedding_sum = (
-            event.embedding_sum
-            if embedding_sum is None
-            else tuple(map(operator.add, embedding_sum, event.embedding_sum))
-        )
+    embedding_sum = _summed(track.embedding_sum, event.embedding_sum)
     return track.evolved(
         lifecycle=event.state,
         center=event.center,
@@ -278,6 +266,15 @@ def _reidentify(track: Track, event: ObjectReidentified, params: Params) -> Trac
         parent_evidence=dict(event.parent_evidence),
         capture_id=None,
     )
+
+
+def _summed(
+    total: tuple[float, ...] | None, added: tuple[float, ...] | None
+) -> tuple[float, ...] | None:
+    """An appearance sum with another one added (either may be absent)."""
+    if added is None:
+        return total
+    return added if total is None else tuple(map(operator.add, total, added))
 
 
 def _box(boxes: list[tuple[Vec3, Vec3]]) -> tuple[float, ...]:
