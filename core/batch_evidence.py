@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from core.association import CandidatePool, appearance_agrees
+from core.association import CandidatePool, appearance_agrees, mutual_matches
 from core.belief import class_compatibility, class_distribution
 from core.events import Event, TrackReparented, TrackRetired
 from core.fixtures import FixtureProposal, ema_center
@@ -315,30 +315,22 @@ class BatchEvidence:
         if hypotheses.size == 0:
             return {}
         missing = np.flatnonzero(objects & arrays.published & self._absent())
-        scores = np.full((hypotheses.size, missing.size), -1.0)
-        for i, h in enumerate(hypotheses.tolist()):
-            embedding = self._embedding_of(h)
-            if embedding is None:
-                continue
-            for j, m in enumerate(missing.tolist()):
-                other = self._embedding_of(m)
-                if (
-                    other is None
-                    or other.shape != embedding.shape
-                    or not arrays.last_observed[m] < arrays.last_observed[h]
-                    or class_compatibility(self._class_belief_of(h), self._class_belief_of(m))
-                    < params.min_class_compatibility
-                ):
-                    continue
-                scores[i, j] = float(embedding @ other)
-        found: dict[str, tuple[str, float]] = {}
-        for i, j in zip(*np.nonzero(scores > params.min_appearance_cosine), strict=True):
-            best = scores[i, j]
-            rivals = np.concatenate((np.delete(scores[i], j), np.delete(scores[:, j], i)))
-            if rivals.size and best - rivals.max() < params.fallback_margin:
-                continue
-            found[arrays.track_ids[missing[j]]] = (arrays.track_ids[hypotheses[i]], float(best))
-        return found
+
+        def cosine(h: int, m: int) -> float | None:
+            if not arrays.last_observed[m] < arrays.last_observed[h]:
+                return None  # the hypothesis was not seen after the object
+            if (
+                class_compatibility(self._class_belief_of(h), self._class_belief_of(m))
+                < params.min_class_compatibility
+            ):
+                return None
+            a, b = self._embedding_of(h), self._embedding_of(m)
+            return None if a is None or b is None or a.shape != b.shape else float(a @ b)
+
+        return {
+            arrays.track_ids[m]: (arrays.track_ids[h], score)
+            for h, m, score in mutual_matches(hypotheses.tolist(), missing.tolist(), cosine, params)
+        }
 
     def _duplicate_objects(self) -> dict[str, str]:
         """Second tracks of one object: a live track whose center lies inside the object box
