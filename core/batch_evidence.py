@@ -311,10 +311,16 @@ class BatchEvidence:
             row = self._row[track_id]
             if row < count:
                 objects[row] = False
-        hypotheses = np.flatnonzero(objects & arrays.unpublished_tentative & ~arrays.gone)
-        if hypotheses.size == 0:
+        hypotheses = objects & arrays.unpublished_tentative & ~arrays.gone
+        if not hypotheses.any():
             return {}
         missing = np.flatnonzero(objects & arrays.published & self._absent())
+        if missing.size == 0:
+            return {}
+        # Only a hypothesis seen after some missing object was can be one of them.
+        with np.errstate(invalid="ignore"):
+            hypotheses &= arrays.last_observed > np.nanmin(arrays.last_observed[missing])
+        hypotheses = np.flatnonzero(hypotheses)
 
         def cosine(h: int, m: int) -> float | None:
             if not arrays.last_observed[m] < arrays.last_observed[h]:
@@ -344,15 +350,22 @@ class BatchEvidence:
         objects = self._live_rows & ~arrays.missing & (np.asarray(self._kinds[:count]) == "object")
         if self._eligible is not None:  # a track association may not match is not one either
             objects &= self._eligible
-        half = arrays.extents / 2
+        rows = np.flatnonzero(objects)
+        centers, half = arrays.centers[rows], arrays.extents[rows] / 2
+        widest = half[:, 0].max(initial=0.0)
         merged: dict[str, str] = {}
         for track_id in sorted(self.observations):
             row = self._row[track_id]
             if row >= count or not objects[row] or track_id in merged:
                 continue
-            gap = np.abs(arrays.centers - arrays.centers[row])
-            held = np.all(gap <= half[row], axis=1) | np.all(gap <= half, axis=1)
-            for other in np.flatnonzero(held & objects).tolist():
+            # x first (one axis over every candidate), then the whole test on the few left.
+            mine = arrays.extents[row] / 2
+            near = np.flatnonzero(
+                np.abs(centers[:, 0] - arrays.centers[row, 0]) <= max(mine[0], widest)
+            )
+            gap = np.abs(centers[near] - arrays.centers[row])
+            held = (gap <= mine).all(axis=1) | (gap <= half[near]).all(axis=1)
+            for other in rows[near[held]].tolist():
                 other_id = arrays.track_ids[other]
                 if other == row or other_id in self.observations or other_id in merged:
                     continue
