@@ -16,13 +16,13 @@ import numpy.typing as npt
 from core.association import CandidatePool, appearance_agrees, mutual_matches
 from core.belief import class_compatibility, class_distribution
 from core.events import Event, TrackReparented, TrackRetired
-from core.fixtures import FixtureProposal, ema_center
+from core.fixtures import FixtureProposal
 from core.geometry import Proposal
 from core.observation import Frame
 from core.params import Params
 from core.rules import PAPER_RULES, UpdateRules
 from core.state import SceneState, TrackKind
-from core.support import SupportSurface, support_of
+from core.support import SupportSurface, support_of, surface_of
 from core.transitions import (
     added_fixture,
     added_object,
@@ -213,28 +213,19 @@ class BatchEvidence:
                 for i, kind in zip(arrays.track_ids, arrays.kinds, strict=True)
                 if kind == "fixture"
             }
-            surfaces = []
-            for track_id in sorted((fixture_ids | set(self.fixtures)) - set(self.merged)):
-                track = self.state.tracks.get(track_id)
-                proposal = self.fixtures.get(track_id)
-                if track is not None and track.verification == "rejected":
-                    continue
-                if track is not None and track.lifecycle == "removed" and proposal is None:
-                    continue
-                if proposal is not None:
-                    center = (
-                        ema_center(
-                            track.center, proposal.center, self.params.fusion.fixture_center_alpha
-                        )
-                        if track is not None and track.lifecycle != "removed"
-                        else vec(proposal.center)
+            self._surfaces = [
+                surface
+                for track_id in sorted((fixture_ids | set(self.fixtures)) - set(self.merged))
+                if (
+                    surface := surface_of(
+                        self.state.tracks.get(track_id),
+                        track_id,
+                        self.fixtures.get(track_id),
+                        self.params.fusion.fixture_center_alpha,
                     )
-                    extent = vec(proposal.extent)
-                else:
-                    assert track is not None
-                    center, extent = track.center, track.extent
-                surfaces.append(SupportSurface(track_id, center, extent))
-            self._surfaces = surfaces
+                )
+                is not None
+            ]
         return self._surfaces
 
     # -- events -------------------------------------------------------------------------------
@@ -453,7 +444,3 @@ def _removed_unpublished(events: list[Event], track_id: str, published: object) 
         and events[-1].track_id == track_id
         and events[-1].type == "remove"
     )
-
-
-def vec(values: FloatArray) -> tuple[float, float, float]:
-    return (float(values[0]), float(values[1]), float(values[2]))

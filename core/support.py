@@ -8,8 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from core.fixtures import footprint_of
+from core.fixtures import FixtureProposal, ema_center, footprint_of
 from core.params import FixtureParams
+from core.state import Track
 
 
 @dataclass(frozen=True)
@@ -19,6 +20,7 @@ class SupportSurface:
     track_id: str
     center: tuple[float, float, float]
     extent: tuple[float, float, float]
+    published: bool = True  # a node of the graph (a hypothesis is not)
 
     @property
     def top_z(self) -> float:
@@ -34,17 +36,44 @@ def support_of(
 ) -> str | None:
     """The fixture whose top the object's bottom rests on, with its center over the footprint.
 
-    Among candidates, the closest top wins (ties by id), so a shelf above a counter is not
+    Among candidates, a published fixture wins over a fixture hypothesis (an `on` edge names
+    a node of the graph; a second, unconfirmed hypothesis of the same counter must not take
+    the objects on it), then the closest top (ties by id), so a shelf above a counter is not
     taken for the counter.
     """
-    best: tuple[float, str] | None = None
+    best: tuple[bool, float, str] | None = None
     for surface in surfaces:
         box = footprint_of(surface.center, surface.extent, params.support_footprint_margin_m)
         if not (box[0] <= center[0] <= box[2] and box[1] <= center[1] <= box[3]):
             continue
         gap = abs(bottom_z - surface.top_z)
-        if gap <= params.support_height_tolerance_m and (
-            best is None or (gap, surface.track_id) < best
-        ):
-            best = (gap, surface.track_id)
-    return None if best is None else best[1]
+        rank = (not surface.published, gap, surface.track_id)
+        if gap <= params.support_height_tolerance_m and (best is None or rank < best):
+            best = rank
+    return None if best is None else best[2]
+
+
+def surface_of(
+    track: Track | None, track_id: str, proposal: FixtureProposal | None, alpha: float
+) -> SupportSurface | None:
+    """A fixture's top as a batch sees it: moved by this batch's cluster (the EMA of its center,
+    the cluster's extent), or as stored; none for a rejected one, or a removed one unseen."""
+    if track is not None and track.verification == "rejected":
+        return None
+    if track is not None and track.lifecycle == "removed" and proposal is None:
+        return None
+    if proposal is not None:
+        if track is None or track.lifecycle == "removed":
+            center = _three(proposal.center)
+        else:
+            center = ema_center(track.center, proposal.center, alpha)
+        extent = _three(proposal.extent)
+    else:
+        assert track is not None
+        center, extent = track.center, track.extent
+    published = track is not None and track.lifecycle == "confirmed"
+    return SupportSurface(track_id, center, extent, published)
+
+
+def _three(values: npt.NDArray[np.float64]) -> tuple[float, float, float]:
+    return (float(values[0]), float(values[1]), float(values[2]))
