@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Annotated, Any, Literal
@@ -18,6 +18,13 @@ from core.params import Params
 from core.plan_ledger import PlanLedger
 
 Vec3 = tuple[float, float, float]
+
+
+def vec3(values: Sequence[float] | npt.NDArray[np.float64]) -> Vec3:
+    """Three floats from an array or sequence."""
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
 # "retired": a hypothesis never published and no longer believed (a false positive, a glimpse):
 # it leaves the association pool and the visibility gate for good.
 LifecycleState = Literal["tentative", "confirmed", "demoted", "removed", "retired"]

@@ -10,7 +10,7 @@ import numpy.typing as npt
 
 from core.fixtures import FixtureProposal, ema_center, footprint_of
 from core.params import FixtureParams
-from core.state import Track
+from core.state import Track, vec3
 
 
 @dataclass(frozen=True)
@@ -64,16 +64,12 @@ def surface_of(
         return None
     if proposal is not None:
         if track is None or track.lifecycle == "removed":
-            center = _three(proposal.center)
+            center = vec3(proposal.center)
         else:
             center = ema_center(track.center, proposal.center, alpha)
-        extent = _three(proposal.extent)
+        extent = vec3(proposal.extent)
     else:
         assert track is not None
         center, extent = track.center, track.extent
     published = track is not None and track.lifecycle == "confirmed"
     return SupportSurface(track_id, center, extent, published)
-
-
-def _three(values: npt.NDArray[np.float64]) -> tuple[float, float, float]:
-    return (float(values[0]), float(values[1]), float(values[2]))

@@ -30,12 +30,7 @@ from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
 from core.lifecycle import moved_distance, should_confirm, should_demote, should_move, should_remove
 from core.params import Params
-from core.state import LifecycleState, Track, Vec3, logistic
-
-
-def vec3(values: Sequence[float] | np.ndarray) -> Vec3:
-    """Three floats from an array or sequence."""
-    return (float(values[0]), float(values[1]), float(values[2]))
+from core.state import LifecycleState, Track, Vec3, logistic, vec3
 
 
 def _top(evidence: Mapping[str, float], current: str | None = None) -> str | None:
