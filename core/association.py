@@ -88,8 +88,9 @@ def associate(
             continue
         matches[j] = track_id
         used_tracks.add(track_id)
-    if params.unique_class_fallback:
-        pieces = set() if pieces_of is None else pieces_of(matches)
+    recoverable = pool.recoverable is not None and bool(pool.recoverable.any())
+    if params.unique_class_fallback and recoverable and len(matches) < len(proposals):
+        pieces = set() if pieces_of is None else pieces_of(matches)  # only when it can matter
         matches.update(_fallback(proposals, pool, matches, used_tracks, pieces, params))
     return matches
 
@@ -109,8 +110,7 @@ def _fallback(
     re-identification that lets a carried mug keep its identity among other mugs). Without it,
     the pairing must be unique: one unmatched proposal of the class and one candidate.
     """
-    if pool.recoverable is None or not pool.recoverable.any():
-        return {}
+    assert pool.recoverable is not None
     candidates = [
         i
         for i in np.flatnonzero(pool.recoverable)
