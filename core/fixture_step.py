@@ -15,6 +15,7 @@ from core.fixtures import (
     holds,
     kept_voxels,
     merged_voxels,
+    same_place,
     voxel_evidence,
 )
 from core.observation import Batch
@@ -122,7 +123,8 @@ def contained_tracks(
     params: Params,
 ) -> dict[str, str]:
     """Second tracks of one fixture: inside the expanded footprint of a confirmed track this
-    batch's cluster matched, of a class that cluster supports; each -> the track it joins."""
+    batch's cluster matched, of a class that cluster supports, or of any class in the same
+    place (`same_place`) with fewer supporting batches; each -> the track it joins."""
     matched = set(matches.values())
     merged: dict[str, str] = {}
     views = {view.track_id: view for view in tracks}
@@ -140,8 +142,12 @@ def contained_tracks(
                 or track.verification == "pending"
             ):
                 continue
-            if (
-                other.label == keeper.label or compatible(other.label, proposal, params.fixtures)
-            ) and holds(keeper, other, params.fixtures):
+            same_class = other.label == keeper.label or compatible(
+                other.label, proposal, params.fixtures
+            )
+            if (same_class and holds(keeper, other, params.fixtures)) or (
+                track.batches_observed < state.tracks[keeper_id].batches_observed
+                and same_place(keeper, other, params.fixtures)
+            ):
                 merged[other.track_id] = keeper_id
     return merged

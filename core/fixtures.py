@@ -365,6 +365,23 @@ def holds(track: FixtureTrackView, other: FixtureTrackView, params: FixtureParam
     return overlap_area(box, grown) >= params.residual_containment * max(area(box), 1e-9)
 
 
+def same_place(track: FixtureTrackView, other: FixtureTrackView, params: FixtureParams) -> bool:
+    """The two footprints overlap by `same_place_min_iou` and their tops lie within
+    `same_place_max_top_gap_m`: one fixture, whatever classes its two tracks were given."""
+    if params.same_place_min_iou >= 1.0:
+        return False
+    box = footprint_of(track.center, track.extent)
+    box_other = footprint_of(other.center, other.extent)
+    shared = overlap_area(box, box_other)
+    union = area(box) + area(box_other) - shared
+    top = track.center[2] + track.extent[2] / 2
+    top_other = other.center[2] + other.extent[2] / 2
+    return (
+        shared >= params.same_place_min_iou * max(union, 1e-9)
+        and abs(top - top_other) <= params.same_place_max_top_gap_m
+    )
+
+
 def associate_fixtures(
     proposals: Sequence[FixtureProposal], tracks: Sequence[FixtureTrackView], params: FixtureParams
 ) -> tuple[dict[int, str], dict[int, str]]:

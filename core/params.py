@@ -304,6 +304,20 @@ class FixtureParams:
     # (the depth there shows the fixture's own surface) and stay published. False: the
     # paper's rule, where such a track stays.
     absorb_contained_tracks: bool = True
+    # Not in the paper: a fixture's voxels are kept per class, so a desk the segmenter calls a
+    # table in some views can give two clusters, and two tracks, of two classes in one place
+    # (issue 8, "desk/table flicker creates duplicate tracks"). Two fixtures cannot stand in one
+    # footprint at one height: a second track whose footprint has at least this IoU with the
+    # keeper's (their unexpanded footprints) and whose top lies within `same_place_max_top_gap_m`
+    # of the keeper's is merged into it like a contained track of its class, when the keeper
+    # has more supporting batches (the better-supported class stands; the consensus gate still
+    # judges it). 0.5: a fixture beside another, even pushed against it, overlaps it far less;
+    # one seen in part first (half a desk) is held by the rule above. 1.0 switches it off.
+    same_place_min_iou: Fraction = 0.5
+    # A cabinet under a counter shares its footprint but not its top: 0.15 m is about three
+    # voxels of the map, more than a flat top's spread between two views, less than any
+    # furniture of the taxonomy stacked on another.
+    same_place_max_top_gap_m: Metres = 0.15
     # Promotion: support from several temporally distinct batches, then the consensus gate.
     confirm_min_batches: Annotated[int, Field(ge=1, le=1000)] = 3
     consensus_min_agreement: Fraction = 0.8  # share of supporting batches whose top class agrees

@@ -133,6 +133,51 @@ def test_mug_on_the_table_gets_the_table_as_parent_and_carried_to_the_counter_re
     assert [t.track_id for t in state.tracks.values() if t.label == "mug"] == [mug.track_id]
 
 
+def with_twin_of_another_class(
+    state: SceneState, events: list[Event], twin: str, label: str, shift: float
+) -> SceneState:
+    """The state with a second track of the table's size and top, labelled `label`, `shift`
+    metres along x from the table (made from the table's own hypothesis and publication, with
+    one supporting batch fewer)."""
+    (table,) = [t for t in fixtures_of(state) if t.label == "table"]
+    center = (table.center[0] + shift, table.center[1], table.center[2])
+    copied: list[Event] = []
+    for event in events:
+        if event.track_id != table.track_id or event.type not in ("add", "confirm"):
+            continue
+        if isinstance(event, FixtureAdded):
+            observation = replace(
+                event.observations[0], label=label, center=center, extent=table.extent
+            )
+            event = replace(event, center=center, observations=(observation,))
+        copied.append(replace(event, track_id=twin))
+    twinned = fold(state, copied)
+    twin_track = twinned.tracks[twin].evolved(
+        class_evidence={label: 1.0},
+        batches_observed=table.batches_observed - 1,
+        center=center,
+        extent=table.extent,
+    )
+    return replace(twinned, tracks={**twinned.tracks, twin: twin_track})
+
+
+def test_a_fixture_track_of_another_class_in_the_same_place_is_merged() -> None:
+    state, events = run(SceneState(), batches(ROOM, TABLE_VIEWS * 2, "b"))
+    (table,) = [t for t in fixtures_of(state) if t.label == "table"]
+    twin = "trk-000099"
+    same = with_twin_of_another_class(state, events, twin, "desk", shift=0.05)
+    assert same.tracks[twin].lifecycle == "confirmed" and same.tracks[twin].label == "desk"
+    batch = next(iter(batches(ROOM, TABLE_VIEWS[:1], "again")))
+    (merge,) = [e for e in decide(same, batch) if isinstance(e, TrackRetired)]
+    assert (merge.track_id, merge.merged_into) == (twin, table.track_id)
+    # Switched off (IoU 1.0), the desk stays: the class rule alone does not take it.
+    off = replace(same.params, fixtures=replace(same.params.fixtures, same_place_min_iou=1.0))
+    assert not [e for e in decide(same, batch, off) if isinstance(e, TrackRetired)]
+    # Beside the table (half its footprint shared) it is another fixture, and stays.
+    beside = with_twin_of_another_class(state, events, twin, "desk", shift=TABLE.size[0] * 0.5)
+    assert not [e for e in decide(beside, batch) if isinstance(e, TrackRetired)]
+
+
 def with_second_table(state: SceneState, events: list[Event], twin: str) -> SceneState:
     """The state with a second table track: the first one's hypothesis and publication, made
     over again 0.3 m from its center and half its size (a part of the table seen first)."""
