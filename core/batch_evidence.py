@@ -189,6 +189,7 @@ class BatchEvidence:
             self.params.visibility,
             self.rules.visibility_gate,
             self.rules.miss_evidence,
+            probes=arrays.centers[rows],
         )
         for row, sighting in zip(rows, sightings, strict=True):
             if sighting.passed == 0:

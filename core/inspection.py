@@ -222,7 +222,11 @@ def _unseen_children(
         return []
     boxes = [_box_of(t) for t in held]
     sightings = samples_passed(
-        np.array([c for c, _ in boxes]), np.array([e for _, e in boxes]), frame, params.visibility
+        np.array([c for c, _ in boxes]),
+        np.array([e for _, e in boxes]),
+        frame,
+        params.visibility,
+        probes=np.array([t.center for t in held]),
     )
     events: list[Event] = []
     for track, sighting in zip(held, sightings, strict=True):

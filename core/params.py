@@ -177,10 +177,12 @@ class VisibilityParams:
     # rarely report an object cut down to a strip by the image border.
     min_in_image_share: Fraction = 0.5
     # Not in the paper: a miss is evidence of absence only when the depth shows the place
-    # empty. The ray to the box's centre must meet the first surface at least this far behind
-    # the centre (the 5x5 window median): an object still there but missed by the detector puts
-    # its own surface in front of its centre, while an empty place shows what lies behind it
-    # (the support, the wall). 0.03 m is about twice the axial noise of a Kinect-class sensor at
+    # empty. The ray to the object's centre mu_i (the robust median of its latest accepted
+    # observation) must meet the first surface at least this far behind it (the 5x5 window
+    # median): an object still there but missed by the detector puts its own surface in front
+    # of its centre, while an empty place shows what lies behind it (the support, the wall).
+    # The centre of the box the gate samples is not used: a mask bleeding onto a grazing
+    # support grows that union box far beside a small object, and its ray then misses it. 0.03 m is about twice the axial noise of a Kinect-class sensor at
     # 3 m (Nguyen et al. 2012: sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 m). False is the paper's
     # gate. A hollow object seen from above (a bowl) shows its inside bottom behind its centre,
     # so for it the rule falls back to the paper's.

@@ -6,8 +6,8 @@ and nothing closer in front (d_meas + 0.15 m >= d_expected). We add the missed-d
 condition: the part of the box that was observable must be large enough in the image that the
 detector would have reported the object had it been there. A sliver at the image border, a
 grazing view or a far object is not evidence of absence: detectors do not report those.
-And the empty-place condition: the depth must show the place empty, the ray to the box's centre
-meeting its first surface behind that centre. An object still there but missed by the detector
+And the empty-place condition: the depth must show the place empty, the ray to the object's
+centre meeting its first surface behind that centre. An object still there but missed by the detector
 shows its own surface in front of its centre: that is the detector's miss, not the object's.
 """
 
@@ -34,7 +34,7 @@ class Sighting:
     passed: int  # samples that passed the gate
     expected_fraction: float  # share of the image the observable part of the box covers
     in_image_share: float = 1.0  # share of the box's projected extent inside the image
-    # The depth at the box's centre lies behind it: the place is seen empty (no object there).
+    # The depth at the object's centre lies behind it: the place is seen empty (no object there).
     center_empty: bool = True
     frame_id: str = ""
 
@@ -77,8 +77,12 @@ def samples_passed(
     params: VisibilityParams,
     occlusion_test: bool = True,
     miss_evidence: MissEvidence = "visible",
+    probes: FloatArray | None = None,
 ) -> list[Sighting]:
     """For each stored box: its samples that pass in `frame`, and its observable image share.
+
+    Whether the place is seen empty is tested along the ray to each box's `probes` point (the
+    object's own center mu_i; the box's centre when not given).
 
     A sample passes when it lies in the valid camera range, projects inside the image, has
     valid depth in a 5x5 window, and d_meas + 0.15 m >= d_expected (no closer surface hides
@@ -126,7 +130,7 @@ def samples_passed(
     # The free-space rule is its own test of an empty place; without the occlusion test there
     # is no depth test at all.
     if occlusion_test and miss_evidence == "visible":
-        empty = _center_empty(centers, frame, params)
+        empty = _center_empty(centers if probes is None else probes, frame, params)
     else:
         empty = np.ones(count, dtype=np.bool_)
     return [
@@ -138,7 +142,7 @@ def samples_passed(
 def _center_empty(
     centers: FloatArray, frame: Frame, params: VisibilityParams
 ) -> npt.NDArray[np.bool_]:
-    """Per box: its centre projects into the image, in range, and the first surface along that
+    """Per object: its centre projects into the image, in range, and the first surface along that
     ray lies at least `empty_center_margin_m` behind it."""
     points = world_to_camera(centers, frame.pose)
     expected = points[:, 2]

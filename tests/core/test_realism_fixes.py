@@ -111,6 +111,35 @@ def test_a_sliver_at_the_image_border_is_not_a_miss() -> None:
     assert [e.details().get("evidence") for e in events] == ["visible_miss"]
 
 
+def test_a_box_grown_beside_the_object_does_not_make_its_place_look_empty() -> None:
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    mug = state.tracks["trk-000001"]
+    # A mask that bled onto a grazing support grew the box the gate samples 0.5 m to one side
+    # and 0.4 m back: its centre now lies beside the mug, in front of the wall.
+    low = [c - e / 2 for c, e in zip(mug.center, mug.extent, strict=True)]
+    high = [c + e / 2 for c, e in zip(mug.center, mug.extent, strict=True)]
+    grown = mug.evolved(box=(low[0], low[1], low[2], high[0] + 0.5, high[1], high[2] + 0.4))
+    state = replace(state, tracks={**state.tracks, mug.track_id: grown})
+    still_there = scene_batch("undetected", MUG, detect=set())
+    frame_seen = still_there.frames[0]
+    low_high = np.array(grown.box).reshape(2, 3)
+    box_center, box_extent = low_high.mean(axis=0)[None], np.diff(low_high, axis=0)
+    params = state.params.visibility
+    # Along the ray to the box's centre the depth shows the wall far behind: "empty".
+    [by_box] = samples_passed(box_center, box_extent, frame_seen, params)
+    assert by_box.center_empty and observable(by_box, params)
+    # Along the ray to the mug's own centre it shows the mug: the detector's miss, not a
+    # missing mug, and no visible miss is counted.
+    [by_center] = samples_passed(
+        box_center, box_extent, frame_seen, params, probes=np.array([mug.center])
+    )
+    assert not by_center.center_empty
+    assert track_events(decide(state, still_there)) == []
+    # Gone, its place does look empty along that ray: a visible miss.
+    gone = track_events(decide(state, scene_batch("gone", {})))
+    assert [e.details()["evidence"] for e in gone] == ["visible_miss"]
+
+
 def test_the_free_space_rule_counts_a_miss_only_where_depth_shows_free_space() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     free_space = UpdateRules(miss_evidence="free_space")
