@@ -182,10 +182,11 @@ class VisibilityParams:
     # median): an object still there but missed by the detector puts its own surface in front
     # of its centre, while an empty place shows what lies behind it (the support, the wall).
     # The centre of the box the gate samples is not used: a mask bleeding onto a grazing
-    # support grows that union box far beside a small object, and its ray then misses it. 0.03 m is about twice the axial noise of a Kinect-class sensor at
-    # 3 m (Nguyen et al. 2012: sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 m). False is the paper's
-    # gate. A hollow object seen from above (a bowl) shows its inside bottom behind its centre,
-    # so for it the rule falls back to the paper's.
+    # support grows that union box far beside a small object, and its ray then misses it.
+    # 0.03 m is about twice the axial noise of a Kinect-class sensor at 3 m (Nguyen et al.
+    # 2012: sigma(z) = 0.0012 + 0.0019 (z - 0.4)^2 m). False is the paper's gate. A hollow
+    # object seen from above (a bowl) can show its inside bottom behind its centre; for it the
+    # rule can fall back to the paper's.
     miss_requires_empty_center: bool = True
     empty_center_margin_m: Metres = 0.03
 
@@ -308,7 +309,7 @@ class FixtureParams:
     absorb_contained_tracks: bool = True
     # Not in the paper: a fixture's voxels are kept per class, so a desk the segmenter calls a
     # table in some views can give two clusters, and two tracks, of two classes in one place
-    # (issue 8, "desk/table flicker creates duplicate tracks"). Two fixtures cannot stand in one
+    # (label flicker would make duplicate fixtures). Two fixtures cannot stand in one
     # footprint at one height: a second track whose footprint has at least this IoU with the
     # keeper's (their unexpanded footprints) and whose top lies within `same_place_max_top_gap_m`
     # of the keeper's is merged into it like a contained track of its class, when the keeper

@@ -7,8 +7,9 @@ condition: the part of the box that was observable must be large enough in the i
 detector would have reported the object had it been there. A sliver at the image border, a
 grazing view or a far object is not evidence of absence: detectors do not report those.
 And the empty-place condition: the depth must show the place empty, the ray to the object's
-centre meeting its first surface behind that centre. An object still there but missed by the detector
-shows its own surface in front of its centre: that is the detector's miss, not the object's.
+centre meeting its first surface behind that centre. An object still there but missed by the
+detector shows its own surface in front of its centre: that is the detector's miss, not the
+object's.
 """
 
 from __future__ import annotations
