@@ -314,6 +314,12 @@ def area(box: Footprint) -> float:
     return max(0.0, box[2] - box[0]) * max(0.0, box[3] - box[1])
 
 
+def footprint_iou(a: Footprint, b: Footprint) -> float:
+    """Intersection over union of two planar boxes."""
+    shared = overlap_area(a, b)
+    return shared / max(area(a) + area(b) - shared, 1e-9)
+
+
 @dataclass(frozen=True)
 class FixtureTrackView:
     """What fixture association needs of a track."""
@@ -340,8 +346,7 @@ def eligible_distance(
     stored = footprint_of(track.center, track.extent)
     grown = footprint_of(track.center, track.extent, params.footprint_expand_m)
     coverage = overlap_area(box, grown) / max(area(box), 1e-9)
-    union = area(box) + area(stored) - overlap_area(box, stored)
-    iou = overlap_area(box, stored) / max(union, 1e-9)
+    iou = footprint_iou(box, stored)
     if coverage >= params.min_expanded_coverage or iou >= params.min_footprint_iou:
         return distance
     return None
@@ -370,15 +375,13 @@ def same_place(track: FixtureTrackView, other: FixtureTrackView, params: Fixture
     `same_place_max_top_gap_m`: one fixture, whatever classes its two tracks were given."""
     if params.same_place_min_iou >= 1.0:
         return False
-    box = footprint_of(track.center, track.extent)
-    box_other = footprint_of(other.center, other.extent)
-    shared = overlap_area(box, box_other)
-    union = area(box) + area(box_other) - shared
+    iou = footprint_iou(
+        footprint_of(track.center, track.extent), footprint_of(other.center, other.extent)
+    )
     top = track.center[2] + track.extent[2] / 2
     top_other = other.center[2] + other.extent[2] / 2
     return (
-        shared >= params.same_place_min_iou * max(union, 1e-9)
-        and abs(top - top_other) <= params.same_place_max_top_gap_m
+        iou >= params.same_place_min_iou and abs(top - top_other) <= params.same_place_max_top_gap_m
     )
 
 

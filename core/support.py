@@ -9,6 +9,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.fixtures import FixtureProposal, ema_center, footprint_of
+from core.graph import is_published
 from core.params import FixtureParams
 from core.state import Track, vec3
 
@@ -71,5 +72,5 @@ def surface_of(
     else:
         assert track is not None
         center, extent = track.center, track.extent
-    published = track is not None and track.lifecycle == "confirmed"
+    published = track is not None and is_published(track)
     return SupportSurface(track_id, center, extent, published)
