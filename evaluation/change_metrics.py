@@ -4,7 +4,8 @@ Event latency starts at the first frame a change could be seen (`sim.observabili
 measures the memory, not the camera's route; it is counted in batches (the update step).
 False absence comes in two readings: identity-agnostic (a present object the memory had found
 where it stands counts as absent when no published node of its class is within 0.5 m of it:
-what a user asking "is there a mug here?" gets) and identity-conditioned (its assigned track is not published: the earlier figure).
+what a user asking "is there a mug here?" gets) and identity-conditioned (its assigned track is
+not published: the earlier figure).
 """
 
 from __future__ import annotations
