@@ -69,6 +69,7 @@ def dynamic_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
     truth = acquired_truth(run)
     predictions = list(result.predictions)[: len(truth)]
     identity = identity_metrics(truth, predictions)
+    any_class = identity_metrics(truth, predictions, class_aware=False)
     assignment = global_assignment(truth, predictions)
     presence = presence_f1(truth, predictions, assignment)
     fixtures = fixture_scores(run.fixtures, result.final_nodes)
@@ -87,6 +88,9 @@ def dynamic_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
     return {
         "idf1": identity.idf1,
         "id_switches": identity.id_switches,
+        # The class-agnostic reading (a node of any label within 0.5 m), kept for comparison.
+        "idf1_any_class": any_class.idf1,
+        "id_switches_any_class": any_class.id_switches,
         "id_presence_f1": presence.f1,
         "events_recalled": recall.recalled,
         "events_recalled_any_latency": recall.recalled_any,

@@ -26,9 +26,11 @@ ORIGIN: Vec3 = (0.0, 0.0, 0.0)
 FAR: Vec3 = (3.0, 0.0, 0.0)
 
 
-def truth_object(object_id: str, center: Vec3 = ORIGIN, present: bool = True) -> TruthObject:
+def truth_object(
+    object_id: str, center: Vec3 = ORIGIN, present: bool = True, label: str = "mug"
+) -> TruthObject:
     """A ground-truth object with the fields the metrics ignore filled in."""
-    return TruthObject(object_id, "mug", center, present, parent=None, visible_pixels=500)
+    return TruthObject(object_id, label, center, present, parent=None, visible_pixels=500)
 
 
 def node(
@@ -133,6 +135,37 @@ def test_global_assignment_maximizes_total_co_occurrence_not_greedy() -> None:
         [node("t1", FAR)],
     )
     assert global_assignment(truth, predictions) == {"a": "t2", "b": "t1"}
+
+
+def test_a_node_stands_only_for_an_object_of_its_label() -> None:
+    # A cluttered table: a remote 0.3 m from a mug. The mug is carried 3 m away at frame 2; its
+    # track m stays at the old place until frame 4, when the memory moves it; the remote's own
+    # track r is published at frame 4. Class-agnostic, the remote takes the stale m at frames
+    # 2-3 and passes to r at frame 4: a switch that is no one's error. Class-aware, m is never
+    # the remote's, so there is no switch: IDTP = 4 (mug: frames 0, 1, 4, 5) + 2 (remote:
+    # frames 4-5), IDFN = 12 - 6, IDFP = 8 published - 6 -> idf1 = 12 / 20.
+    remote_at: Vec3 = (0.3, 0.0, 0.0)
+    remote = truth_object("remote", remote_at, label="remote")
+    truth = truth_frames(
+        *([truth_object("mug"), remote] for _ in range(2)),
+        *([truth_object("mug", FAR), remote] for _ in range(4)),
+    )
+    predictions = prediction_frames(
+        *([node("m")] for _ in range(4)),
+        *([node("m", FAR), node("r", remote_at, label="remote")] for _ in range(2)),
+    )
+    agnostic = identity_metrics(truth, predictions, class_aware=False)
+    assert agnostic.id_switches == 1
+    aware = identity_metrics(truth, predictions)
+    assert aware.id_switches == 0
+    assert aware.idf1 == pytest.approx(12 / 20)
+    assert global_assignment(truth, predictions) == {"mug": "m", "remote": "r"}
+    # A node of another label within the gate covers nothing class-aware; class-agnostic, a
+    # cup's node at the mug's old place "tracks" the remote for 6 frames.
+    cup_only = prediction_frames(*([node("c", label="cup")] for _ in range(6)))
+    assert identity_metrics(truth, cup_only).idf1 == 0.0
+    assert global_assignment(truth, cup_only) == {}
+    assert global_assignment(truth, cup_only, class_aware=False) == {"remote": "c"}
 
 
 def test_presence_counts_ghosts_missing_tracks_far_tracks_and_unassigned_objects() -> None:

@@ -34,6 +34,7 @@ def run(
         "idf1": idf1,
         "id_presence_f1": idf1,
         "id_switches": 0,
+        "id_switches_any_class": 1 if method == "A" else 2,
         "events_recalled": recalled,
         "events_total": 4,
         "false_absent_checkpoints": absent,
@@ -64,8 +65,14 @@ def test_pooled_columns_and_sample_std(tmp_path: Path) -> None:
     text = table("dynamic", rows)
     # A: idf1 mean .9, sample std .141; events 7/8; false absence pooled 1/40 = .025, by
     # identity 0/40; latencies 0, 2, 1, 0, 2, 1 -> median 1, max 2. B: nothing eligible.
-    assert "| A | .900±.141 | .900±.141 | .000±.000 | 7/8 | .025 | .000 | 1/2 |" in text
-    assert "| B | .500±.000 | .500±.000 | .000±.000 | 1/4 | .000 | .000 | 1/2 |" in text
+    # Class-aware switches 0, the class-agnostic reading beside them (A 1 per run, B 2).
+    assert (
+        "| A | .900±.141 | .900±.141 | .000±.000 | 1.000±.000 | 7/8 | .025 | .000 | 1/2 |" in text
+    )
+    assert (
+        "| B | .500±.000 | .500±.000 | .000±.000 | 2.000±.000 | 1/4 | .000 | .000 | 1/2 |" in text
+    )
+    assert text.splitlines()[1] == "|---|" + "---|" * 8
     written = write_report("dynamic", rows, tmp_path, [7])
     assert [p.name for p in written] == [
         "results.json",
