@@ -287,6 +287,11 @@ def run_row(
             {"fixture_id": c.fixture_id, "outcome": c.outcome, "view": list(c.view)}
             for c in result.captures
         ],
+        # Captures the memory refused (nothing recorded): no inspection, not in the budget.
+        "refused_captures": [
+            {"fixture_id": c.fixture_id, "outcome": c.outcome, "view": list(c.view)}
+            for c in result.refused
+        ],
         "fine_shortfalls": fine_shortfalls(result),
         "coarse_shortfalls": coarse_shortfalls(result),
         "keyframes": len(result.keyframes),

@@ -195,14 +195,16 @@ def map_figure(result: RolloutResult, path: Path) -> Path:
     for capture in result.captures:
         colour = "tab:green" if capture.outcome == "completed" else "tab:red"
         axis.plot(capture.view[0], capture.view[1], "o", color=colour, ms=5)
+    for capture in result.refused:
+        axis.plot(capture.view[0], capture.view[1], "x", color="tab:red", ms=6)
     for fixture in result.truth_fixtures:
         axis.plot(fixture.center[0], fixture.center[1], "s", mfc="none", color="tab:orange", ms=9)
     for node in result.final_graph:
         if node.kind == "fixture":
             axis.plot(node.center[0], node.center[1], "x", color="tab:purple", ms=7)
     axis.set_title(
-        f"{result.scenario} seed {result.seed} ({result.order}): views (green done, red failed),"
-        "\ntrue fixtures (squares), found (x)",
+        f"{result.scenario} seed {result.seed} ({result.order}): views (green done, red failed,"
+        " red x refused),\ntrue fixtures (squares), found (purple x)",
         fontsize=8,
     )
     axis.set_aspect("equal")

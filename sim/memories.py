@@ -69,6 +69,9 @@ class PlanStep:
     deferred: tuple[str, ...] = ()
 
 
+REFUSED = "refused: "  # an inspection outcome: the memory answered 4xx and recorded nothing
+
+
 class Memory(Protocol):
     """What the robot talks to: the core in process, or the service over HTTP."""
 
@@ -129,7 +132,7 @@ class InProcessMemory:
                 self.state, capture_id, fixture_id, decode_frames(body.frames), None, view=view
             )
         except PbdagError as error:  # the service answers 4xx, and appends nothing
-            return f"refused: {error}"
+            return f"{REFUSED}{error}"
         self.state = fold(self.state, events)
         outcome: str = events[-1].details()["outcome"]
         return outcome
@@ -227,7 +230,7 @@ class ServiceMemory:
             return self.client.post_inspection(self.scene_id, body).outcome
         except ApiError as error:
             if 400 <= error.status < 500 and error.status != 429:
-                return f"refused: {error.detail}"  # the service appended nothing
+                return f"{REFUSED}{error.detail}"  # the service appended nothing
             raise
 
     def graph(self) -> list[Node]:

@@ -7,7 +7,9 @@ point. It asks the memory for the plan and acts on it:
   around: `look_around_views` keyframes, evenly spaced in yaw;
 - `inspect`: it drives to the view, makes a fixed-base RGB-D sweep (the view's heading first,
   then the alternates of `sweep_yaw_deg`) at full detector resolution and posts the inspection
-  (the primary view first, alternates for retry; the view it stood at);
+  (the primary view first, alternates for retry; the view it stood at). A capture the memory
+  refuses (its target merged into another fixture track while the robot drove, say) records
+  nothing: it is no inspection, and the robot asks for the plan again;
 - `done`: it stops.
 
 It drives along a shortest path over the simulator's true free space (the room, walls and
@@ -40,7 +42,7 @@ from pbdag_client import Client
 from sim.camera import look_at
 from sim.detector_model import RealisticDetector
 from sim.free_space import FreeSpace
-from sim.memories import InProcessMemory, Memory, Node, ServiceMemory, TrackSummary
+from sim.memories import REFUSED, InProcessMemory, Memory, Node, ServiceMemory, TrackSummary
 from sim.render import add_kinect_noise, render
 from sim.scenario import load_scenario
 from sim.scenario_spec import Scenario
@@ -57,7 +59,10 @@ class RolloutSettings:
     """How the simulated robot acts; defaults are the protocol's (documented in the README)."""
 
     keyframe_budget: int = 600  # coarse discovery: semantic keyframes posted on the way
-    inspection_budget: int | None = None  # inspection captures (None: until the plan is done)
+    # Inspections the memory recorded (None: until the plan is done). A capture the memory
+    # refused (a 4xx: nothing appended, e.g. its target merged away while the robot drove to
+    # it) is no inspection: it is kept in `refused` and the robot asks for the plan again.
+    inspection_budget: int | None = None
     keyframe_spacing_m: float = 0.5  # one keyframe per this much travel
     look_around_views: int = 6  # keyframes of a turn in place (60 degrees apart, FOV 62)
     keyframe_pitch_deg: float = -20.0  # keyframes look a little down, at furniture tops
@@ -88,7 +93,8 @@ class RolloutResult:
     via_service: bool
     path: list[tuple[float, float]] = field(default_factory=list)
     keyframes: list[tuple[float, float, float]] = field(default_factory=list)  # x, y, travelled
-    captures: list[Capture] = field(default_factory=list)
+    captures: list[Capture] = field(default_factory=list)  # inspections the memory recorded
+    refused: list[Capture] = field(default_factory=list)  # captures it refused (nothing recorded)
     decisions: list[dict[str, Any]] = field(default_factory=list)
     plan_ms: list[float] = field(default_factory=list)
     stop_reason: str = ""
@@ -263,12 +269,13 @@ def rollout(
             vx, vy, vyaw, vpitch = step.view
             robot.drive_to(vx, vy)
             frames = robot.sweep(vyaw, vpitch)
-            capture_id = f"cap-{len(result.captures):03d}"
+            capture_id = f"cap-{len(result.captures) + len(result.refused):03d}"
             view = ViewPose(x=vx, y=vy, yaw=_wrap(vyaw))
             outcome = memory.inspect(capture_id, step.fixture_id, frames, view)
-            result.captures.append(
-                Capture(step.fixture_id, step.view, outcome, len(result.keyframes), memory.graph())
+            capture = Capture(
+                step.fixture_id, step.view, outcome, len(result.keyframes), memory.graph()
             )
+            (result.refused if outcome.startswith(REFUSED) else result.captures).append(capture)
             continue
         # explore
         if robot.keyframes_left <= 0:
@@ -319,7 +326,7 @@ def main(argv: list[str] | None = None) -> None:
     objects = [n for n in result.final_graph if n.kind == "object"]
     print(
         f"{scenario.name} seed {arguments.seed}: {len(result.keyframes)} keyframes, "
-        f"{len(result.captures)} inspections, path {result.path_length_m:.1f} m, "
+        f"{len(result.captures)} inspections ({len(result.refused)} refused), path {result.path_length_m:.1f} m, "
         f"{len(fixtures)} fixtures, {len(objects)} objects, {result.seconds:.1f} s; "
         f"stop: {result.stop_reason}"
     )

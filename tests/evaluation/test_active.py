@@ -20,8 +20,8 @@ from evaluation.predictions import PredictedNode
 from service.app import create_app
 from service.bootstrap import Container
 from service.cli import main
-from sim.memories import InProcessMemory, Node, ServiceMemory, TrackSummary
-from sim.rollout import RolloutResult, rollout
+from sim.memories import REFUSED, InProcessMemory, Node, ServiceMemory, TrackSummary
+from sim.rollout import RolloutResult, RolloutSettings, rollout
 from sim.scenario import scenario_from_dict
 from sim.truth import TruthFixture
 from tests.clients import local_pbdag_client
@@ -91,6 +91,34 @@ def test_a_rollout_from_an_empty_map_finds_inspects_and_exhausts_the_frontiers()
     # The capture graphs grow the fine F1 curve; budgets past the last capture keep its value.
     row, _ = run_row_like(result)
     assert at_budget(row, 99) == row["fine_f1_after_inspections"][-1]
+
+
+class RefusesOnce(InProcessMemory):
+    """The memory, refusing the first capture as the service does a fixture merged away (409)."""
+
+    def __init__(self, name: str) -> None:
+        super().__init__(name)
+        self.refusals = 0
+
+    def inspect(
+        self, capture_id: str, fixture_id: str, frames: list[dict[str, Any]], view: ViewPose
+    ) -> str:
+        if self.refusals == 0:
+            self.refusals += 1
+            return f"{REFUSED}fixture {fixture_id!r} is retired, not confirmed"
+        return super().inspect(capture_id, fixture_id, frames, view)
+
+
+def test_a_refused_capture_is_no_inspection_and_the_robot_plans_again() -> None:
+    # Budget one inspection: the refused capture does not spend it, the next one does.
+    memory = RefusesOnce("small")
+    settings = RolloutSettings(inspection_budget=1)
+    result = rollout(scenario_from_dict(copy.deepcopy(SMALL)), 7, memory, settings)
+    assert [c.outcome.startswith(REFUSED) for c in result.refused] == [True]
+    assert [c.outcome for c in result.captures] == ["completed"]
+    assert result.stop_reason == "inspection budget (1) spent"
+    recorded = [t for t in memory.state.tracks.values() if t.inspection_status == "completed"]
+    assert [t.track_id for t in recorded] == [result.captures[0].fixture_id]
 
 
 def run_row_like(result: Any) -> tuple[dict[str, Any], Any]:
