@@ -109,9 +109,10 @@ def identity_metrics(
     """IDF1, IDP, IDR (motmetrics) and CLEAR-MOT switches of published object tracks vs present truth.
 
     A ground-truth object and a track can be matched at a frame when their centers are at most
-    `max_distance` metres apart (and, class-aware, the node carries the object's label). idf1 = 2 IDTP / (2 IDTP + IDFP + IDFN) under the best one-to-one
-    global identity matching; id_switches counts frames where an object is matched to a different
-    track than at its previous match. idp is 0.0 (not NaN) when nothing was published, and every
+    `max_distance` metres apart and, class-aware, the node carries the object's label.
+    idf1 = 2 IDTP / (2 IDTP + IDFP + IDFN) under the best one-to-one global identity matching;
+    id_switches counts frames where an object is matched to a different track than at its
+    previous match. idp is 0.0 (not NaN) when nothing was published, and every
     score is 0.0 when there is no ground truth at all. num_frames is the number of frames given.
     """
     if len(truth) != len(predictions):
@@ -170,9 +171,10 @@ def global_assignment(
     """One-to-one map ground-truth object id -> track id maximizing total co-occurring frames.
 
     Two ids co-occur at a frame when the object is present, the track is published, their
-    centers are at most `max_distance` apart and (class-aware) the track carries its label. The map maximizes the sum of co-occurrence counts
-    over assigned pairs (Hungarian algorithm), which is IDF1's own global matching made explicit;
-    pairs that never co-occur are left unassigned.
+    centers are at most `max_distance` apart and (class-aware) the track carries its label. The
+    map maximizes the sum of co-occurrence counts over assigned pairs (Hungarian algorithm),
+    which is IDF1's own global matching made explicit; pairs that never co-occur are left
+    unassigned.
     """
     if len(truth) != len(predictions):
         raise ValueError(f"{len(truth)} truth frames but {len(predictions)} prediction frames")
