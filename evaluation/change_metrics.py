@@ -14,7 +14,13 @@ from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from evaluation.metrics import present_objects, published_objects, ratio, squared_distance
+from evaluation.metrics import (
+    matchable,
+    present_objects,
+    published_objects,
+    ratio,
+    squared_distance,
+)
 from evaluation.predictions import FramePrediction, MethodEvent
 from sim.truth import FrameTruth, ScheduledEvent, Vec3
 
@@ -202,7 +208,7 @@ def class_false_absence(
                 acquired.discard(truth_object.object_id)  # moved: acquired anew where it is
             place[truth_object.object_id] = truth_object.center
             covered = any(
-                node.label == truth_object.label
+                matchable(truth_object, node, class_aware=True)
                 and squared_distance(node.center, truth_object.center) <= max_squared
                 for node in nodes
             )
