@@ -1,4 +1,4 @@
-"""Request bodies of the v1 HTTP API: structural checks only (decoding lives in service.codec)."""
+"""Request bodies of the v1 HTTP API: structural checks only (decoding lives in codec.observations)."""
 
 from __future__ import annotations
 

@@ -112,10 +112,17 @@ class NodeLinkGraph(BaseModel):
 
 
 class EventOut(BaseModel):
-    """One event of the log."""
+    """One event of the log, its payload as stored."""
 
     seq: int
-    type: str
+    type: str = Field(
+        description="The audit type, in the paper's vocabulary (add, update, confirm, move, "
+        "reparent, demote, remove, retire, ...); several topics share one."
+    )
+    topic: str = Field(
+        description="The event's class, one name per class and payload form (object_added, "
+        "visible_miss, confirm, ...): what `details` holds."
+    )
     track_id: str | None
     state: str | None
     batch_id: str | None

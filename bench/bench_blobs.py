@@ -67,7 +67,7 @@ def canonical_bodies(count: int, frames: int, compact: bool) -> Iterator[bytes]:
     raw format (binary depth, zstandard) or as canonical JSON (the format before it)."""
     from api_schema import BatchIn
     from bench.service_load import render_templates
-    from service.codec import canonical_json
+    from codec.canonical import canonical_json
     from service.store.raw_batches import encode_raw_batch
 
     templates = render_templates(4)

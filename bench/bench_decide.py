@@ -12,11 +12,12 @@ import numpy as np
 
 from bench.perf_common import write_results
 from core.decide import decide
-from core.events import Event, ObjectAdded, Observation, TrackRetired
+from core.events import Event, ObjectAdded, TrackRetired
 from core.evolve import fold
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
 from core.state import SceneState
+from core.values import Observation
 from sim.camera import CameraModel, look_at
 from sim.detector import detect
 from sim.render import add_kinect_noise, render

@@ -19,6 +19,7 @@ import numpy as np
 
 from api_schema import BatchIn
 from bench.perf_common import write_results
+from codec.observations import decode_batch
 from core.decide import decide
 from core.evolve import fold
 from core.fixture_map import VoxelMap
@@ -26,7 +27,6 @@ from core.fixture_step import fixture_batch
 from core.observation import Batch
 from core.state import SceneState
 from core.voxels import pack, unpack
-from service.codec import decode_batch
 from sim.scenario import REPO_ROOT, load_scenario
 from sim.stream import iter_frames, iter_wire_batches
 

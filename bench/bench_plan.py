@@ -24,9 +24,9 @@ from core.observation import Frame, Intrinsics
 from core.occupancy import UNKNOWN, MapGeometry, OccupancyGrid
 from core.occupancy_evidence import occupancy_evidence
 from core.params import Params
-from core.plan_ledger import ViewPose
 from core.planner import plan
 from core.state import SceneState, Track
+from core.values import ViewPose
 from sim.camera import CameraModel, look_at
 from sim.render import add_kinect_noise, render
 from sim.world import Box, World

@@ -267,9 +267,10 @@ def bench_raw(args: argparse.Namespace) -> None:
     """Bytes per raw frame before and after the compact format, and per event."""
     from api_schema import BatchIn
     from bench.service_load import render_templates
+    from codec.canonical import canonical_json
+    from codec.observations import decode_batch
     from core.decide import decide
     from core.state import SceneState
-    from service.codec import canonical_json, decode_batch
     from service.store.raw_batches import ZSTD_LEVEL, decode_raw_batch, encode_raw_batch
 
     templates = render_templates(min(args.frames, 20))

@@ -11,7 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from core.events import Event, ObjectAdded, ObjectObserved, Observation, VisibleMiss
+from core.events import Event, ObjectAdded, ObjectObserved, VisibleMiss
+from core.values import Observation
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 EMBEDDING_DIM = 64

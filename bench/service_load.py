@@ -101,10 +101,11 @@ def stage_breakdown(templates: Sequence[BodyTemplate], count: int, rate: float) 
     import hashlib
 
     from api_schema import BatchIn
+    from codec.canonical import canonical_json
+    from codec.observations import decode_batch
     from core.decide import decide
     from core.evolve import fold
     from core.state import SceneState
-    from service.codec import canonical_json, decode_batch
 
     stages: dict[str, list[float]] = {
         "parse_validate": [],

@@ -107,7 +107,7 @@ class TheirAppender:
                 StoredEvent(
                     originator_id=originator,
                     originator_version=version,
-                    topic=event.type,
+                    topic=event.topic,
                     state=orjson.dumps(event.details()),
                 )
             )

@@ -21,7 +21,7 @@ from core.geometry import Proposal
 from core.observation import Frame
 from core.params import Params
 from core.rules import PAPER_RULES, UpdateRules
-from core.state import SceneState, TrackKind
+from core.state import SceneState
 from core.support import SupportSurface, support_of, surface_of
 from core.transitions import (
     added_fixture,
@@ -32,6 +32,7 @@ from core.transitions import (
     retired,
     visible_miss,
 )
+from core.values import TrackKind
 from core.visibility import Sighting, in_view_rows, observable, samples_passed
 
 FloatArray = npt.NDArray[np.float64]

@@ -1,124 +1,67 @@
-"""The stored form of events: type, envelope and payload, and back (core/events.py has the classes).
+"""The stored form of events: topic, envelope and payload, and back (core/events.py has the classes).
 
-A few stored types hold more than one class, told apart by the payload itself (the stored JSON
-predates the typed classes and is kept byte for byte): `add` by its `kind`, `update` by its
-`evidence` and, for observations, by whether it carries a fixture's EMA `center`.
+A row is stored under its class's topic (the store's `type` column). Rows stored in an older
+form are read through the upcasters of core/upcasters.py.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from typing import Any
+from typing import Any, get_args
 
-from pydantic import TypeAdapter
+from core.event_envelope import payload_adapter
+from core.events import Event
+from core.upcasters import LEGACY_NAMES, topic_of, upcast
 
-from core.events import (
-    BaselineFrozen,
-    BaselineLoaded,
-    BatchSkipped,
-    Event,
-    FixtureAdded,
-    FixtureEvidence,
-    FixtureObserved,
-    InspectionRecorded,
-    InspectionTargeted,
-    ObjectAdded,
-    ObjectObserved,
-    ObjectReidentified,
-    OccupancyEvidence,
-    SceneCreated,
-    TrackConfirmed,
-    TrackDemoted,
-    TrackMoved,
-    TrackRemoved,
-    TrackReparented,
-    TrackRetired,
-    TrackVerified,
-    VerificationRequested,
-    VisibleMiss,
-)
-
-ENVELOPE = frozenset({"track_id", "state", "frame_id"})
-
-
-def payload_of(event: Event) -> dict[str, Any]:
-    """The payload of `event` as stored JSON (JSON-able values, in the stored key order)."""
-    result: dict[str, Any] = _adapter(type(event)).dump_python(
-        event, mode="json", by_alias=True, exclude=set(ENVELOPE)
+# Every event class by its topic, read from the union: registering a class is adding it there.
+EVENT_CLASSES: Mapping[str, type[Event]] = {cls.topic: cls for cls in get_args(Event)}
+# The audit types of the API (add, update, confirm, ...), and the stored names of each.
+STORED_NAMES: Mapping[str, tuple[str, ...]] = {
+    audit: tuple(
+        sorted(
+            {topic for topic, cls in EVENT_CLASSES.items() if cls.type == audit}
+            | {name for name, of in LEGACY_NAMES.items() if of == audit}
+        )
     )
-    return result
-
-
-_ADAPTERS: dict[type[Event], TypeAdapter[Any]] = {}
-
-
-def _adapter(cls: type[Event]) -> TypeAdapter[Any]:
-    """pydantic's validator and serializer of one event class, built on first use."""
-    adapter = _ADAPTERS.get(cls)
-    if adapter is None:
-        adapter = _ADAPTERS[cls] = TypeAdapter(cls)
-    return adapter
-
-
-_SINGLE_CLASS: dict[str, type[Event]] = {
-    cls.type: cls
-    for cls in (
-        SceneCreated,
-        FixtureEvidence,
-        BaselineFrozen,
-        BaselineLoaded,
-        BatchSkipped,
-        TrackConfirmed,
-        TrackMoved,
-        TrackReparented,
-        TrackDemoted,
-        TrackRemoved,
-        TrackRetired,
-        VerificationRequested,
-        TrackVerified,
-        InspectionRecorded,
-        OccupancyEvidence,
-        InspectionTargeted,
-    )
+    for audit in sorted({cls.type for cls in EVENT_CLASSES.values()})
 }
-EVENT_TYPE_NAMES: tuple[str, ...] = (*sorted(_SINGLE_CLASS), "add", "update")
 
 
-def event_class(type_name: str, details: Mapping[str, Any]) -> type[Event]:
-    """The class of a stored event; ValueError for a type or payload no class describes."""
-    if type_name == "add":
-        return FixtureAdded if details.get("kind") == "fixture" else ObjectAdded
-    if type_name == "update":
-        if details.get("evidence") == "visible_miss":
-            return VisibleMiss
-        if details.get("evidence") == "reidentified":
-            return ObjectReidentified
-        return FixtureObserved if "center" in details else ObjectObserved
-    cls = _SINGLE_CLASS.get(type_name)
+def event_class(topic: str) -> type[Event]:
+    """The class of a topic; ValueError for a name that is no class's topic."""
+    cls = EVENT_CLASSES.get(topic)
     if cls is None:
-        raise ValueError(f"unknown event type {type_name!r}")
+        raise ValueError(f"unknown event type {topic!r}")
     return cls
 
 
+def stored_names(stored_name: str, details: Mapping[str, Any]) -> tuple[str, str]:
+    """(topic, audit type) of a stored row, without decoding its payload: the topic names the
+    payload's form (an older form keeps its older topic); an unknown name is returned as is."""
+    topic = topic_of(stored_name, details)
+    cls = EVENT_CLASSES.get(topic)
+    return topic, cls.type if cls is not None else LEGACY_NAMES.get(topic, topic)
+
+
 def event_from_record(record: Mapping[str, Any]) -> Event:
-    """An event from its stored form; pydantic's ValidationError names a bad payload field."""
-    details: Mapping[str, Any] = record.get("details") or {}
-    cls = event_class(record["type"], details)
+    """An event from its stored form (`topic` is the stored name, today's or an older one);
+    pydantic's ValidationError names a bad payload field."""
+    topic, details = upcast(record["topic"], record.get("details") or {})
     values = {
         **details,
         "track_id": record.get("track_id"),
         "state": record.get("state"),
         "frame_id": record.get("frame_id"),
     }
-    event: Event = _adapter(cls).validate_python(values)
+    event: Event = payload_adapter(event_class(topic)).validate_python(values)
     return event
 
 
 def event_to_record(event: Event) -> dict[str, Any]:
-    """The stored form: type, envelope and the JSON-able payload."""
+    """The stored form: topic, envelope and the JSON-able payload."""
     return {
-        "type": event.type,
+        "topic": event.topic,
         "track_id": event.track_id,
         "state": event.state,
         "frame_id": event.frame_id,

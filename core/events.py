@@ -2,10 +2,13 @@
 
 Events are the schema of the log. Each class declares its payload fields in the order the log
 stores them, and carries what `evolve` needs, so folding the log never recomputes perception.
-Every event has an envelope (the track it concerns, the lifecycle state after it, the frame it
-came from), stored in columns of its own; `details()` is the rest, as stored JSON.
+Events hold values only (core/values.py), never the in-memory records they fold into.
 
-The stored form (and how a stored row finds its class) is in core/event_records.py.
+Each class has a `topic`, the one name its rows are stored under, and a `type` from the paper's
+audit vocabulary, which several classes may share (`ObjectAdded` and `FixtureAdded` are both an
+`add`). `Event`, at the end, is the closed union of the classes: a new event class is added
+there and nowhere else (core/event_records.py reads the topics from it; `fold` does not type
+check until it has a case for it). The stored form is in core/event_records.py.
 """
 
 from __future__ import annotations
@@ -14,138 +17,27 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Annotated, Any, ClassVar, Literal
 
-from pydantic import ConfigDict, Field
+from pydantic import Field
 
-from core.plan_ledger import ViewPose
-from core.state import LifecycleState, Track, Vec3
-
-__all__ = [
-    "BaselineFrozen",
-    "BaselineLoaded",
-    "BaselineSource",
-    "BatchSkipped",
-    "Event",
-    "FixtureAdded",
-    "FixtureEvidence",
-    "FixtureObserved",
-    "InspectionRecorded",
-    "InspectionTargeted",
-    "LifecycleState",
-    "ObjectAdded",
-    "ObjectObserved",
-    "ObjectReidentified",
-    "Observation",
-    "OccupancyEvidence",
-    "SceneCreated",
-    "Sighting",
-    "TrackAdded",
-    "TrackConfirmed",
-    "TrackDemoted",
-    "TrackEvent",
-    "TrackMoved",
-    "TrackObserved",
-    "TrackRemoved",
-    "TrackReparented",
-    "TrackRetired",
-    "TrackUpdated",
-    "TrackVerified",
-    "VerificationRequested",
-    "ViewPose",
-    "VisibleMiss",
-    "VoxelDetection",
-]
-
-# Only finite numbers are stored: a log with NaN or infinity could not be replayed.
-_FINITE = ConfigDict(allow_inf_nan=False)
-
-
-def _absent_when_none(value: object) -> bool:
-    return value is None
-
-
-# A payload key that the log omits (rather than storing null) when it does not apply.
-Omitted = Field(exclude_if=_absent_when_none)
-
-
-# -- records inside payloads -------------------------------------------------------------------
-
-
-@dataclass(frozen=True, kw_only=True)
-class Observation:
-    """One grounded observation of a track in a batch (a proposal, or a fixture cluster)."""
-
-    __pydantic_config__ = _FINITE
-    frame_id: str
-    label: str
-    score: float
-    center: Vec3
-    extent: Vec3
-    valid_pixels: int  # inlier pixels of an object mask; voxels of a fixture cluster
-    parent: str | None  # support parent from geometry, None when on nothing known
-    # The detector's scores of other classes, when it gave them: the observation's unit of
-    # class evidence is spread over them (older logs: the label alone).
-    class_scores: Annotated[Mapping[str, float] | None, Omitted] = None
-
-
-@dataclass(frozen=True, kw_only=True)
-class VoxelDetection:
-    """One fixture mask's contribution to the voxel map: class similarities and covered voxels."""
-
-    __pydantic_config__ = _FINITE
-    frame_id: str
-    class_scores: tuple[float, ...]  # in the order of params.fixtures.taxonomy
-    voxels: tuple[int, ...]  # flat (x, y, z) integer voxel keys
-
-
-@dataclass(frozen=True, kw_only=True)
-class BaselineSource:
-    """The frozen package a session started from."""
-
-    __pydantic_config__ = _FINITE
-    scene_id: str
-    version: int
-    sha256: str
-
-
-# -- the envelope ------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True, kw_only=True)
-class Event:
-    """Base of every event: the envelope the log keeps in columns."""
-
-    __pydantic_config__ = _FINITE
-    type: ClassVar[str] = "event"
-    track_id: str | None = None
-    state: LifecycleState | None = None
-    frame_id: str | None = None
-
-    def details(self) -> dict[str, Any]:
-        """The payload as stored JSON (JSON-able values, in the stored key order)."""
-        from core.event_records import payload_of  # the stored form lives beside the classes
-
-        return payload_of(self)
-
-    def touched_tracks(self) -> tuple[str, ...]:
-        """Every track whose state the event changes."""
-        return () if self.track_id is None else (self.track_id,)
-
-
-@dataclass(frozen=True, kw_only=True)
-class TrackEvent(Event):
-    """An event about one track: it names the track and its lifecycle state after the event."""
-
-    track_id: str
-    state: LifecycleState
-
+from core.event_envelope import BaseEvent, TrackEvent
+from core.values import (
+    BaselineFixture,
+    BaselineSource,
+    Observation,
+    Omitted,
+    Vec3,
+    ViewPose,
+    VoxelDetection,
+)
 
 # -- scene events ------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True, kw_only=True)
-class SceneCreated(Event):
+class SceneCreated(BaseEvent):
     """First event of every scene: its name and the parameters its events are decided with."""
 
+    topic: ClassVar[str] = "scene_created"
     type: ClassVar[str] = "scene_created"
     name: str
     params: Mapping[str, Any]  # Params.to_dict(); folded with Params.from_dict
@@ -153,15 +45,16 @@ class SceneCreated(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
-class FixtureEvidence(Event):
+class FixtureEvidence(BaseEvent):
     """Class evidence of the batch's fixture masks, added to the scene's voxel map."""
 
+    topic: ClassVar[str] = "fixture_evidence"
     type: ClassVar[str] = "fixture_evidence"
     detections: tuple[VoxelDetection, ...]
 
 
 @dataclass(frozen=True, kw_only=True)
-class OccupancyEvidence(Event):
+class OccupancyEvidence(BaseEvent):
     """What the batch's depth says of the occupancy map A_t (section 3.2): the cells its rays
     crossed (free) and the cells its points in the robot's height band fell in (occupied).
 
@@ -169,6 +62,7 @@ class OccupancyEvidence(Event):
     and stored as runs: gap from the previous run's end, run length, gap, length, ...
     """
 
+    topic: ClassVar[str] = "occupancy_evidence"
     type: ClassVar[str] = "occupancy_evidence"
     resolution_m: float
     side: int  # cells per side of the grid
@@ -178,9 +72,10 @@ class OccupancyEvidence(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
-class BaselineFrozen(Event):
+class BaselineFrozen(BaseEvent):
     """The confirmed fixtures frozen as an immutable, versioned package; they become pinned."""
 
+    topic: ClassVar[str] = "baseline_frozen"
     type: ClassVar[str] = "baseline_frozen"
     version: int
     sha256: str
@@ -192,12 +87,15 @@ class BaselineFrozen(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
-class BaselineLoaded(Event):
+class BaselineLoaded(BaseEvent):
     """A new session starts from a frozen baseline: its fixtures keep their identities."""
 
+    # Version 2: the fixtures as baseline records. Version 1 ("baseline_loaded") stored each
+    # as the whole in-memory track record (core/upcasters.py reads it).
+    topic: ClassVar[str] = "baseline_loaded_v2"
     type: ClassVar[str] = "baseline_loaded"
     source: BaselineSource
-    fixtures: tuple[Track, ...]  # confirmed, pinned, published where the package says
+    fixtures: tuple[BaselineFixture, ...]
     next_track_number: int
 
     def touched_tracks(self) -> tuple[str, ...]:
@@ -206,13 +104,14 @@ class BaselineLoaded(Event):
 
 
 @dataclass(frozen=True, kw_only=True)
-class BatchSkipped(Event):
+class BatchSkipped(BaseEvent):
     """A batch that can never be applied was parked as dead; the scene moved on without it.
 
     The memory lacks what that batch saw, and the log says so: an operator may requeue the
     batch, which then applies after the batches that came in the meantime.
     """
 
+    topic: ClassVar[str] = "batch_skipped"
     type: ClassVar[str] = "batch_skipped"
     batch_id: str
     attempts: int
@@ -233,6 +132,7 @@ class TrackAdded(TrackEvent):
 class ObjectAdded(TrackAdded):
     """A new object hypothesis: the prior plus one positive observation (equation (3))."""
 
+    topic: ClassVar[str] = "object_added"
     evidence: Literal["observed"] = "observed"
     observations: tuple[Observation, ...]
     embedding_sum: tuple[float, ...] | None  # appearance of this batch, summed
@@ -249,6 +149,7 @@ class ObjectAdded(TrackAdded):
 class FixtureAdded(TrackAdded):
     """A new coarse fixture hypothesis from a voxel cluster no fixture track explains."""
 
+    topic: ClassVar[str] = "fixture_added"
     evidence: Literal["observed"] = "observed"
     observations: tuple[Observation, ...]
     center: Vec3
@@ -283,6 +184,7 @@ class TrackObserved(TrackUpdated):
 class ObjectObserved(TrackObserved):
     """State fusion of a positive batch for an object: latest center, evidence, appearance."""
 
+    topic: ClassVar[str] = "object_observed"
     evidence: Literal["observed"] = "observed"
     observations: tuple[Observation, ...]
     embedding_sum: tuple[float, ...] | None
@@ -303,6 +205,7 @@ class ObjectObserved(TrackObserved):
 class FixtureObserved(TrackObserved):
     """Support for a fixture from one more batch; its center is the EMA (alpha 0.35)."""
 
+    topic: ClassVar[str] = "fixture_observed"
     evidence: Literal["observed"] = "observed"
     observations: tuple[Observation, ...]
     center: Vec3
@@ -329,6 +232,7 @@ class ObjectReidentified(TrackObserved):
     the hypothesis was seen in (equation (3)); the hypothesis retires, merged into it.
     """
 
+    topic: ClassVar[str] = "object_reidentified"
     evidence: Literal["reidentified"] = "reidentified"
     hypothesis: str  # the track id of the hypothesis
     appearance_cosine: float
@@ -352,6 +256,7 @@ class ObjectReidentified(TrackObserved):
 class VisibleMiss(TrackUpdated):
     """An unmatched track the visibility gate says was observable: a miss (U V = 1)."""
 
+    topic: ClassVar[str] = "visible_miss"
     evidence: Literal["visible_miss"] = "visible_miss"
     samples_passed: int
     samples_total: int
@@ -367,6 +272,7 @@ class VisibleMiss(TrackUpdated):
 class TrackConfirmed(TrackEvent):
     """Graph publication: cross-batch confirmation with p_exist >= 0.72."""
 
+    topic: ClassVar[str] = "confirm"
     type: ClassVar[str] = "confirm"
     p_exist: float
     center: Vec3
@@ -379,6 +285,7 @@ class TrackConfirmed(TrackEvent):
 class TrackMoved(TrackEvent):
     """A published track is at least 0.35 m from its last published position."""
 
+    topic: ClassVar[str] = "move"
     type: ClassVar[str] = "move"
     moved_from: Annotated[Vec3, Field(alias="from")]
     to: Vec3
@@ -389,6 +296,7 @@ class TrackMoved(TrackEvent):
 class TrackReparented(TrackEvent):
     """The support parent changed: the old and the new parent."""
 
+    topic: ClassVar[str] = "reparent"
     type: ClassVar[str] = "reparent"
     old_parent: str | None
     new_parent: str
@@ -398,6 +306,7 @@ class TrackReparented(TrackEvent):
 class TrackDemoted(TrackEvent):
     """A published track fell below p_exist 0.30 and is unpublished."""
 
+    topic: ClassVar[str] = "demote"
     type: ClassVar[str] = "demote"
     p_exist: float
 
@@ -406,6 +315,7 @@ class TrackDemoted(TrackEvent):
 class TrackRemoved(TrackEvent):
     """p_exist <= 0.12 after at least three visibility-admissible misses, or a rejection."""
 
+    topic: ClassVar[str] = "remove"
     type: ClassVar[str] = "remove"
     p_exist: float
     visible_misses: Annotated[int | None, Omitted] = None
@@ -418,6 +328,7 @@ class TrackRetired(TrackEvent):
     believed (removed by visible misses, or unseen for `retire_unseen_hypothesis_s`), or a
     second track of one fixture, merged into the track that stands for it."""
 
+    topic: ClassVar[str] = "retire"
     type: ClassVar[str] = "retire"
     reason: Literal["removed", "unseen", "merged"]
     last_observed: float | None
@@ -431,6 +342,7 @@ class TrackRetired(TrackEvent):
 class VerificationRequested(TrackEvent):
     """A near-threshold or class-conflicting fixture waits for one bounded verification."""
 
+    topic: ClassVar[str] = "verification_requested"
     type: ClassVar[str] = "verification_requested"
     candidates: Mapping[str, float]  # each class's mean similarity over the cluster
     batch_votes: Mapping[str, float]  # how the supporting batches voted
@@ -444,6 +356,7 @@ class VerificationRequested(TrackEvent):
 class TrackVerified(TrackEvent):
     """A verdict on a pending track: evidence weight 3, existence +1.8 or -2.2."""
 
+    topic: ClassVar[str] = "verify"
     type: ClassVar[str] = "verify"
     verdict: Literal["confirm", "reject"]
     label: str
@@ -457,6 +370,7 @@ class TrackVerified(TrackEvent):
 class InspectionRecorded(TrackEvent):
     """One fixture-centered capture in the ledger: frames, outcome and attached children."""
 
+    topic: ClassVar[str] = "inspection"
     type: ClassVar[str] = "inspection"
     capture_id: str
     fixture_id: str
@@ -481,6 +395,7 @@ class InspectionTargeted(TrackEvent):
     score of equation (5), and the view with J and its terms (equation (6)).
     """
 
+    topic: ClassVar[str] = "inspection_targeted"
     type: ClassVar[str] = "inspection_targeted"
     robot: ViewPose  # the robot's pose the plan was decided for
     view: ViewPose  # where to stand, facing the fixture
@@ -505,3 +420,31 @@ class InspectionTargeted(TrackEvent):
 
 # A positive observation of a track in a batch (isinstance accepts this union).
 Sighting = ObjectAdded | FixtureAdded | ObjectObserved | FixtureObserved
+
+# An event of the log: exactly one of these classes. The one place a new event class is
+# registered: its topic is read from here, and `fold`, whose match over this union ends in
+# `assert_never`, fails type checking until it has a case for the new class.
+Event = (
+    SceneCreated
+    | FixtureEvidence
+    | OccupancyEvidence
+    | BaselineFrozen
+    | BaselineLoaded
+    | BatchSkipped
+    | ObjectAdded
+    | FixtureAdded
+    | ObjectObserved
+    | FixtureObserved
+    | ObjectReidentified
+    | VisibleMiss
+    | TrackConfirmed
+    | TrackMoved
+    | TrackReparented
+    | TrackDemoted
+    | TrackRemoved
+    | TrackRetired
+    | VerificationRequested
+    | TrackVerified
+    | InspectionRecorded
+    | InspectionTargeted
+)

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import operator
 from collections.abc import Iterable
-from typing import Any
+from typing import assert_never
 
+from core.baseline import loaded_track
 from core.belief import class_distribution
 from core.events import (
     BaselineFrozen,
@@ -35,12 +36,8 @@ from core.events import (
 from core.occupancy import GridWork
 from core.params import Params
 from core.plan_ledger import InspectionLock, PlanLedger
-from core.state import (
-    BaselineRecord,
-    SceneState,
-    Track,
-    Vec3,
-)
+from core.state import BaselineRecord, SceneState, Track, TrackChanges
+from core.values import Vec3
 
 
 def evolve(state: SceneState, event: Event) -> SceneState:
@@ -85,7 +82,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 pass  # the log records the gap; the state is what the other batches made it
             case BaselineLoaded():
                 for fixture in event.fixtures:
-                    tracks[fixture.track_id] = fixture
+                    tracks[fixture.track_id] = loaded_track(fixture)
                 next_track_number = max(next_track_number, event.next_track_number)
             case ObjectAdded() | FixtureAdded():
                 next_track_number += 1
@@ -134,7 +131,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 touched.update(event.children)
                 plan = _after_capture(plan, event)
             case _:
-                raise ValueError(f"no evolve rule for event {type(event).__name__}")
+                assert_never(event)
     return SceneState(
         params=params,
         name=name,
@@ -207,39 +204,45 @@ def _observe(
         for label, share in class_distribution(observation.label, observation.class_scores).items():
             class_evidence[label] = class_evidence.get(label, 0.0) + weight * share
     centers = track.recent_centers + tuple(o.center for o in observations)
-    embedding_sum = _summed(track.embedding_sum, event.embedding_sum)
     last = observations[-1]
-    misses = 0
+    changes: TrackChanges = {
+        "lifecycle": event.state,
+        "class_evidence": class_evidence,
+        "existence_logodds": event.existence_logodds,
+        "extent": last.extent,
+        "recent_centers": centers[-params.fusion.max_recent_centers :],
+        "embedding_sum": _summed(track.embedding_sum, event.embedding_sum),
+        "embedding_count": track.embedding_count + event.embedding_count,
+        "last_observed": event.timestamp,
+        "last_observed_frame": last.frame_id,
+        "batches_observed": event.batches_observed,
+        "visible_misses": 0,
+    }
     if isinstance(event, FixtureAdded | FixtureObserved):
         # Fixtures: the EMA center, the best frame to crop, the class margin (summed since the
         # track was last acquired: a re-acquired fixture earns its consensus anew); no parents.
         restart = isinstance(event, FixtureAdded) or event.reacquired
-        fixture_fields: dict[str, Any] = {
-            "center": event.center,
-            "best_frame": event.best_frame,
-            "best_frame_support": event.best_frame_support,
-            "margin_sum": (0.0 if restart else track.margin_sum) + event.margin,
-            "parent_evidence": dict(track.parent_evidence),
-        }
+        changes.update(
+            {
+                "center": event.center,
+                "best_frame": event.best_frame,
+                "best_frame_support": event.best_frame_support,
+                "margin_sum": (0.0 if restart else track.margin_sum) + event.margin,
+                "parent_evidence": dict(track.parent_evidence),
+            }
+        )
     else:
-        fixture_fields = {"center": last.center, "parent_evidence": dict(event.parent_evidence)}
-        fixture_fields["box"] = _observed_box(track, event, params)
+        changes.update(
+            {
+                "center": last.center,
+                "parent_evidence": dict(event.parent_evidence),
+                "box": _observed_box(track, event, params),
+            }
+        )
         if isinstance(event, ObjectObserved) and event.corroborated is False:
-            misses = track.visible_misses  # an uncorroborated match leaves the misses standing
-    return track.evolved(
-        **fixture_fields,
-        lifecycle=event.state,
-        class_evidence=class_evidence,
-        existence_logodds=event.existence_logodds,
-        extent=last.extent,
-        recent_centers=centers[-params.fusion.max_recent_centers :],
-        embedding_sum=embedding_sum,
-        embedding_count=track.embedding_count + event.embedding_count,
-        last_observed=event.timestamp,
-        last_observed_frame=last.frame_id,
-        batches_observed=event.batches_observed,
-        visible_misses=misses,
-    )
+            # An uncorroborated match leaves the misses standing.
+            changes["visible_misses"] = track.visible_misses
+    return track.evolved(**changes)
 
 
 def _reidentify(track: Track, event: ObjectReidentified, params: Params) -> Track:

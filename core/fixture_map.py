@@ -25,13 +25,14 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from core.events import FixtureEvidence
 from core.fixtures import (
     ClusterSummary,
     FixtureProposal,
@@ -43,9 +44,6 @@ from core.fixtures import (
 )
 from core.params import FixtureParams
 from core.voxels import MASK, OFFSET, pack, unpack
-
-if TYPE_CHECKING:  # core.events imports core.state, which holds the map
-    from core.events import FixtureEvidence
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

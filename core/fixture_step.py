@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from core.events import FixtureEvidence, VoxelDetection
+from core.events import FixtureEvidence
 from core.fixtures import (
     FixtureProposal,
     FixtureTrackView,
@@ -21,6 +21,7 @@ from core.fixtures import (
 from core.observation import Batch
 from core.params import Params
 from core.state import SceneState
+from core.values import VoxelDetection
 from core.voxels import unpack
 
 

@@ -21,10 +21,10 @@ from core.geometry import Proposal
 from core.masks import Mask, mask_iou
 from core.observation import Frame
 from core.params import Params
-from core.plan_ledger import ViewPose
-from core.state import InspectionStatus, SceneState, Track, vec3
+from core.state import SceneState, Track
 from core.support import SupportSurface, support_of
 from core.transitions import added_object, confirmed, observed_object, visible_miss
+from core.values import InspectionStatus, ViewPose, vec3
 from core.visibility import observable, samples_passed
 
 SUPPORT_SLAB_M = 0.02  # thickness of the sampled support region (the fixture's top surface)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from core.params import LifecycleParams, Params
-from core.state import LifecycleState, TrackKind, Vec3
+from core.values import LifecycleState, TrackKind, Vec3
 
 
 def should_confirm(

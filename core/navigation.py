@@ -22,7 +22,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from core.occupancy import CODE_FREE, CODE_OCCUPIED, CODE_UNKNOWN, MapGeometry, OccupancyGrid
 from core.params import PlannerParams
-from core.plan_ledger import ViewPose
+from core.values import ViewPose
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]

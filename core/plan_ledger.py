@@ -7,26 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from pydantic import ConfigDict
-
-
-@dataclass(frozen=True, kw_only=True)
-class ViewPose:
-    """A planar robot pose in the world frame: metres and radians (yaw about z, from +x)."""
-
-    __pydantic_config__ = ConfigDict(allow_inf_nan=False)
-    x: float
-    y: float
-    yaw: float
-
-    def to_dict(self) -> dict[str, float]:
-        """JSON-able form."""
-        return {"x": self.x, "y": self.y, "yaw": self.yaw}
-
-    @classmethod
-    def from_dict(cls, record: Mapping[str, Any]) -> ViewPose:
-        """Inverse of `to_dict`."""
-        return cls(x=float(record["x"]), y=float(record["y"]), yaw=float(record["yaw"]))
+from core.values import ViewPose
 
 
 @dataclass(frozen=True)

@@ -31,9 +31,9 @@ from core.events import Event, InspectionTargeted
 from core.navigation import Frontier, Navigation
 from core.occupancy import MapGeometry
 from core.params import Params
-from core.plan_ledger import ViewPose
 from core.state import SceneState, Track
 from core.uncertainty import Uncertainty, fixture_uncertainty
+from core.values import ViewPose
 from core.views import View, best_view
 
 Decision = Literal["inspect", "explore", "done"]

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from functools import cached_property
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, TypedDict, Unpack
 
 import numpy as np
 import numpy.typing as npt
@@ -16,24 +16,10 @@ from core.fixture_map import VoxelMap
 from core.occupancy import OccupancyGrid
 from core.params import Params
 from core.plan_ledger import PlanLedger
+from core.values import InspectionStatus, LifecycleState, TrackKind, Vec3, VerificationStatus
 
-Vec3 = tuple[float, float, float]
-
-
-def vec3(values: Sequence[float] | npt.NDArray[np.float64]) -> Vec3:
-    """Three floats from an array or sequence."""
-    return (float(values[0]), float(values[1]), float(values[2]))
-
-
-# "retired": a hypothesis never published and no longer believed (a false positive, a glimpse):
-# it leaves the association pool and the visibility gate for good.
-LifecycleState = Literal["tentative", "confirmed", "demoted", "removed", "retired"]
-TrackKind = Literal["object", "fixture"]
-VerificationStatus = Literal["pending", "confirmed", "rejected"]
-InspectionStatus = Literal["completed", "abandoned"]
 # 4: the occupancy map, the scene clock and the inspection plan; 5: fine nodes of captures
 SNAPSHOT_FORMAT_VERSION = 5
-VoxelKey = tuple[int, int, int]
 
 
 def _none(value: object) -> bool:
@@ -84,14 +70,14 @@ class Track:
     # does both. Removal releases it to the front end.
     capture_id: Annotated[str | None, Field(exclude_if=_none)] = None
 
-    def evolved(self, **changes: Any) -> Track:
+    def evolved(self, **changes: Unpack[TrackChanges]) -> Track:
         """A copy with `changes` (what dataclasses.replace does, without its per-field cost).
 
         Cached derived values (the label) are dropped so they are recomputed from the new fields.
         """
-        unknown = changes.keys() - _TRACK_FIELDS
+        unknown = changes.keys() - _CHANGEABLE
         if unknown:
-            raise TypeError(f"Track has no field {sorted(unknown)}")
+            raise TypeError(f"Track has no changeable field {sorted(unknown)}")
         copy = object.__new__(Track)
         fields_now = {key: value for key, value in self.__dict__.items() if key in _TRACK_FIELDS}
         copy.__dict__.update(fields_now, **changes)
@@ -196,7 +182,38 @@ class Track:
         return track
 
 
+class TrackChanges(TypedDict, total=False):
+    """What `Track.evolved` may change: every field but the identity and the kind."""
+
+    lifecycle: LifecycleState
+    class_evidence: Mapping[str, float]
+    existence_logodds: float
+    center: Vec3
+    extent: Vec3
+    recent_centers: tuple[Vec3, ...]
+    parent_evidence: Mapping[str, float]
+    parent: str | None
+    embedding_sum: tuple[float, ...] | None
+    embedding_count: int
+    last_observed: float | None
+    last_observed_frame: str | None
+    batches_observed: int
+    visible_misses: int
+    published_center: Vec3 | None
+    pinned: bool
+    verification: VerificationStatus | None
+    verdict_frame: str | None
+    margin_sum: float
+    best_frame: str | None
+    best_frame_support: int
+    inspection_status: InspectionStatus | None
+    inspection_attempts: int
+    box: tuple[float, ...] | None
+    capture_id: str | None
+
+
 _TRACK_FIELDS = frozenset(f.name for f in fields(Track))
+_CHANGEABLE = TrackChanges.__optional_keys__
 
 
 def _vec3(values: Any) -> Vec3:

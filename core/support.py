@@ -11,7 +11,8 @@ import numpy.typing as npt
 from core.fixtures import FixtureProposal, ema_center, footprint_of
 from core.graph import is_published
 from core.params import FixtureParams
-from core.state import Track, vec3
+from core.state import Track
+from core.values import vec3
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,6 @@ from core.events import (
     ObjectAdded,
     ObjectObserved,
     ObjectReidentified,
-    Observation,
     TrackConfirmed,
     TrackDemoted,
     TrackMoved,
@@ -30,7 +29,8 @@ from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
 from core.lifecycle import moved_distance, should_confirm, should_demote, should_move, should_remove
 from core.params import Params
-from core.state import LifecycleState, Track, Vec3, logistic, vec3
+from core.state import Track, logistic
+from core.values import LifecycleState, Observation, Vec3, vec3
 
 
 def _top(evidence: Mapping[str, float], current: str | None = None) -> str | None:

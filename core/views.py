@@ -24,8 +24,8 @@ import numpy.typing as npt
 
 from core.navigation import Navigation
 from core.params import PlannerParams
-from core.plan_ledger import ViewPose
 from core.state import Track
+from core.values import ViewPose
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from api_schema import BatchIn
+from codec.observations import decode_batch
 from core.decide import decide
 from core.events import Event, SceneCreated, TrackReparented
 from core.evolve import evolve, fold
@@ -21,7 +22,6 @@ from core.state import SceneState, Track
 from evaluation.methods import Method
 from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
 from pbdag_client import Client
-from service.codec import decode_batch
 
 WireBatch = tuple[
     int, dict[str, Any]

@@ -13,6 +13,7 @@ from service.settings import Settings
 
 if TYPE_CHECKING:
     from service.bootstrap import Container
+    from service.store.event_log import EventLog
 
 GC_LISTED = 20  # batches `pbdag gc` names one per line; the rest are counted
 
@@ -91,18 +92,26 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
 
 def _rebuild(args: argparse.Namespace) -> int:
     from service.bootstrap import build_container
-    from service.store.projection import rebuild_scene
 
     container = build_container()
-    quarantined = {scene.id for scene in container.log.scenes() if scene.quarantined}
-    scene_ids = args.scene or [scene.id for scene in container.log.scenes()]
+    try:
+        return _rebuild_scenes(container.log, args.scene)
+    finally:
+        container.engine.dispose()  # its pool's connections closed, not left to the collector
+
+
+def _rebuild_scenes(log: EventLog, only: list[str] | None) -> int:
+    from service.store.projection import rebuild_scene
+
+    quarantined = {scene.id for scene in log.scenes() if scene.quarantined}
+    scene_ids = only or [scene.id for scene in log.scenes()]
     failed = False
     for scene_id in scene_ids:  # one scene's failure never stops the others
         if scene_id in quarantined:
             print(f"{scene_id}: quarantined (see `pbdag repair`); skipped")
             continue
         try:
-            report = rebuild_scene(container.log, scene_id)
+            report = rebuild_scene(log, scene_id)
         except PbdagError as error:
             print(f"{scene_id}: FAILED: {error.detail}")
             failed = True

@@ -7,14 +7,14 @@ concurrency).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
-from typing import Any
 
-from core.baseline import decide_load
-from core.events import BaselineSource, Event
+from core.baseline import BaselinePackage, decide_load
+from core.events import Event
 from core.params import Params
 from core.state import SceneState
+from core.values import BaselineSource
 from service.bootstrap import Container
 from service.store.errors import ConcurrencyConflict
 from service.store.event_log import SceneRecord
@@ -42,7 +42,7 @@ def create_scene(
     container: Container,
     name: str,
     params: Params,
-    package: Mapping[str, Any] | None = None,
+    package: BaselinePackage | None = None,
     source: BaselineSource | None = None,
 ) -> SceneRecord:
     """A scene; from a baseline package (a later session in the same house), event 0 names the

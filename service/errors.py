@@ -20,6 +20,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.responses import Response
 from starlette.types import Message, Send
 
+from codec.observations import InvalidObservation
 from core.errors import (
     InvalidCommand,
     InvalidParams,
@@ -36,7 +37,6 @@ from service.access_errors import (
     RateLimited,
     Unauthorized,
 )
-from service.codec import InvalidObservation
 from service.store.errors import (
     BatchConflict,
     ConcurrencyConflict,

@@ -2,20 +2,13 @@
 
 from __future__ import annotations
 
-import io
-
-import numpy as np
-from PIL import Image
-
 from api_schema import (
     BaselinePackage,
     BaselineSummary,
     BatchStatus,
     Deferred,
     EventOut,
-    Frontier,
     Inspection,
-    Occupancy,
     PlanOut,
     PlanTarget,
     Pose2D,
@@ -25,12 +18,10 @@ from api_schema import (
     Uncertainty,
     ViewOut,
 )
+from codec.occupancy import frontier_out
 from core.events import InspectionRecorded
-from core.navigation import Frontier as CoreFrontier
-from core.navigation import frontier_clusters
-from core.occupancy import CODE_FREE, CODE_OCCUPIED, CODE_UNKNOWN, MapGeometry, OccupancyGrid
 from core.planner import Candidate, Plan
-from core.state import SceneState, Track
+from core.state import Track
 from service.store.baselines import StoredPackage
 from service.store.event_log import SceneRecord, StoredEvent
 from service.store.queue_records import BatchRecord
@@ -102,76 +93,6 @@ def belief_out(scene_id: str, seq: int, track: Track) -> TrackBelief:
     )
 
 
-def _known_window(grid: OccupancyGrid) -> tuple[tuple[int, int], np.ndarray]:
-    """The codes of the bounding box of the known cells, and its origin (row, col)."""
-    codes = grid.codes()
-    rows, cols = np.nonzero(codes != CODE_UNKNOWN)
-    if rows.size == 0:
-        return grid.origin, np.zeros((0, 0), dtype=np.uint8)
-    r0, r1, c0, c1 = int(rows.min()), int(rows.max()) + 1, int(cols.min()), int(cols.max()) + 1
-    return (grid.origin[0] + r0, grid.origin[1] + c0), codes[r0:r1, c0:c1]
-
-
-def _frontier_out(frontier: CoreFrontier) -> Frontier:
-    return Frontier(
-        size=frontier.size,
-        centroid=list(frontier.centroid),
-        goal=None if frontier.goal is None else list(frontier.goal),
-        travel_m=frontier.travel_m,
-    )
-
-
-def occupancy_out(scene_id: str, state: SceneState) -> Occupancy:
-    """The map's known window as (code, count) runs, with its frontier clusters."""
-    geometry = MapGeometry.of(state.params.occupancy)
-    origin, codes = _known_window(state.occupancy)
-    flat = codes.ravel()
-    runs: list[int] = []
-    if flat.size:
-        starts = np.concatenate(([0], np.flatnonzero(flat[1:] != flat[:-1]) + 1))
-        lengths = np.diff(np.concatenate((starts, [flat.size])))
-        runs = np.column_stack((flat[starts], lengths)).ravel().tolist()
-    x0, y0 = geometry.center_of(origin[0], origin[1])
-    half = geometry.resolution_m / 2
-    counts = np.bincount(flat, minlength=3) if flat.size else np.zeros(3, np.int64)
-    min_cells = state.params.planner.min_frontier_cells
-    return Occupancy(
-        scene_id=scene_id,
-        seq=state.head_seq,
-        resolution_m=geometry.resolution_m,
-        origin=[float(x0) - half, float(y0) - half],
-        shape=[int(codes.shape[0]), int(codes.shape[1])],
-        encoding="rle",
-        cells=runs,
-        counts={
-            "unknown": int(counts[CODE_UNKNOWN]),
-            "free": int(counts[CODE_FREE]),
-            "occupied": int(counts[CODE_OCCUPIED]),
-        },
-        frontiers=[
-            _frontier_out(f) for f in frontier_clusters(state.occupancy, geometry, min_cells)
-        ],
-    )
-
-
-# Grey levels of the PNG (as ROS map_server writes maps): occupied black, free white.
-PNG_LEVELS = np.array([205, 254, 0], dtype=np.uint8)  # unknown, free, occupied
-
-
-def occupancy_png(state: SceneState) -> tuple[bytes, list[float]]:
-    """The known window as an 8-bit grey PNG, north (+y) up, and its origin (x, y)."""
-    geometry = MapGeometry.of(state.params.occupancy)
-    origin, codes = _known_window(state.occupancy)
-    if codes.size == 0:
-        codes = np.zeros((1, 1), dtype=np.uint8)  # one unknown cell: PNG has no empty image
-    image = Image.fromarray(np.ascontiguousarray(PNG_LEVELS[codes][::-1]))
-    buffer = io.BytesIO()
-    image.save(buffer, format="PNG")
-    x0, y0 = geometry.center_of(origin[0], origin[1])
-    half = geometry.resolution_m / 2
-    return buffer.getvalue(), [float(x0) - half, float(y0) - half]
-
-
 def _queue_entry(entry: Candidate) -> QueueEntry:
     return QueueEntry(
         fixture_id=entry.fixture_id,
@@ -217,7 +138,7 @@ def plan_out(scene_id: str, plan: Plan, event_seq: int | None) -> PlanOut:
         event_seq=event_seq,
         replaces=plan.replaces,
         target=target,
-        frontier=None if plan.frontier is None else _frontier_out(plan.frontier),
+        frontier=None if plan.frontier is None else frontier_out(plan.frontier),
         deferred=[Deferred(fixture_id=d.fixture_id, reason=d.reason) for d in plan.deferred],
         queue=[_queue_entry(entry) for entry in plan.ranked],
     )

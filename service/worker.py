@@ -25,11 +25,11 @@ import pydantic
 import sqlalchemy as sa
 
 from api_schema import BatchIn
+from codec.observations import decode_batch
 from core.decide import decide
 from core.errors import PbdagError
 from core.state import SceneState
 from service.bootstrap import Container
-from service.codec import decode_batch
 from service.logs import log_context
 from service.store.blobs import BlobNotFound, RawBatchMissing
 from service.store.errors import ConcurrencyConflict, LeaseLost

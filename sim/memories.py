@@ -14,6 +14,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar
 
 from api_schema import BatchIn, InspectionIn, RobotPose
+from codec.observations import decode_batch, decode_frames
+from codec.occupancy import occupancy_out
 from core.decide import decide
 from core.errors import PbdagError
 from core.events import SceneCreated
@@ -21,13 +23,11 @@ from core.evolve import evolve, fold
 from core.graph import is_published
 from core.inspection import decide_inspection
 from core.params import Params
-from core.plan_ledger import ViewPose
 from core.planner import Plan, decide_plan, unresolved_fixtures
 from core.state import SceneState
+from core.values import ViewPose
 from pbdag_client import Client, RateLimited
 from pbdag_client import PbdagError as ApiError
-from service.codec import decode_batch, decode_frames
-from service.wire import occupancy_out
 
 T = TypeVar("T")
 

@@ -37,7 +37,7 @@ import numpy as np
 import numpy.typing as npt
 
 from core.params import Params
-from core.plan_ledger import ViewPose
+from core.values import ViewPose
 from pbdag_client import Client
 from sim.camera import look_at
 from sim.detector_model import RealisticDetector

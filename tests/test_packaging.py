@@ -14,7 +14,7 @@ from ingest import cli as ingest_cli
 from service.cli import main
 from tests.test_layers import ROOT, imported_roots
 
-SERVICE_PACKAGES = ("core", "service", "api_schema", "migrations")
+SERVICE_PACKAGES = ("core", "codec", "service", "api_schema", "migrations")
 # Distributions whose import name differs from their own.
 IMPORT_NAMES = {"open3d-cpu": "open3d", "pyyaml": "yaml", "pillow": "PIL"}
 

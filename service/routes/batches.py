@@ -9,9 +9,10 @@ from typing import Annotated
 from fastapi import APIRouter, Path, Response
 
 from api_schema import BatchIn, BatchStatus
+from codec.canonical import canonical_json
+from codec.observations import decode_batch
 from core.errors import NotFound
 from service.auth import RequireAdmin
-from service.codec import canonical_json, decode_batch
 from service.deps import ContainerDep, SceneDep, admission
 from service.store.raw_batches import encode_raw_batch
 from service.wire import batch_out

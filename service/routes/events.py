@@ -27,7 +27,7 @@ def list_events(
     track_id: Annotated[str | None, text_query("Only events of this track.", 64)] = None,
     type: Annotated[
         str | None,
-        text_query("Only events of this type (add, confirm, ...).", 64),
+        text_query("Only events of this audit type (add, update, confirm, ...), every topic.", 64),
     ] = None,
 ) -> EventPage:
     """Events after a seq cursor; `next_after` continues the listing (null at the end)."""

@@ -13,12 +13,12 @@ from api_schema import (
     InspectionQueue,
     InspectionQueueItem,
 )
+from codec.observations import decode_frames
 from core.events import InspectionRecorded
 from core.inspection import decide_inspection
-from core.plan_ledger import ViewPose
 from core.planner import queue_status, unresolved_fixtures
 from core.uncertainty import fixture_uncertainty
-from service.codec import decode_frames
+from core.values import ViewPose
 from service.commands import run_command
 from service.deps import ContainerDep, SceneDep, StatesDep
 from service.wire import inspection_out

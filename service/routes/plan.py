@@ -8,13 +8,14 @@ from fastapi import APIRouter, Query, Request
 from starlette.responses import Response
 
 from api_schema import Occupancy, PlanIn, PlanOut
+from codec.occupancy import occupancy_out, occupancy_png
 from core.events import Event
-from core.plan_ledger import ViewPose
 from core.planner import Plan, decide_plan, plan
 from core.state import SceneState
+from core.values import ViewPose
 from service.commands import run_command
 from service.deps import AsOf, ContainerDep, SceneDep, StatesDep
-from service.wire import occupancy_out, occupancy_png, plan_out
+from service.wire import plan_out
 
 router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["plan"])
 

@@ -6,8 +6,8 @@ from fastapi import APIRouter
 
 from api_schema import Scene, SceneCreate, SceneList
 from core.errors import NotFound
-from core.events import BaselineSource
 from core.params import Params
+from core.values import BaselineSource
 from service.commands import create_scene
 from service.deps import AnySceneDep, ContainerDep
 from service.store.baselines import read_package

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Query
 
 from api_schema import Explanation, TrackBelief
 from core.errors import NotFound
-from core.state import LifecycleState
+from core.values import LifecycleState
 from service.deps import AsOf, ContainerDep, SceneDep, StatesDep, TrackId, text_query
 from service.explain import explain
 from service.store.projection import query_tracks

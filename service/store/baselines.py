@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import orjson
 import sqlalchemy as sa
 
+from core.baseline import BaselinePackage
 from service.store.engine import read_transaction
 from service.store.tables import baselines
 
@@ -20,7 +21,7 @@ class StoredPackage:
     version: int
     seq: int
     sha256: str
-    package: dict[str, Any]
+    package: BaselinePackage
 
 
 def read_package(engine: sa.Engine, scene_id: str, version: int) -> StoredPackage | None:
@@ -33,7 +34,7 @@ def read_package(engine: sa.Engine, scene_id: str, version: int) -> StoredPackag
         ).first()
     if row is None:
         return None
-    return StoredPackage(scene_id, row.version, row.seq, row.sha256, orjson.loads(row.body))
+    return _package(scene_id, row)
 
 
 def list_packages(engine: sa.Engine, scene_id: str) -> list[StoredPackage]:
@@ -44,7 +45,10 @@ def list_packages(engine: sa.Engine, scene_id: str) -> list[StoredPackage]:
             .where(baselines.c.scene_id == scene_id)
             .order_by(baselines.c.version)
         ).all()
-    return [
-        StoredPackage(scene_id, row.version, row.seq, row.sha256, orjson.loads(row.body))
-        for row in rows
-    ]
+    return [_package(scene_id, row) for row in rows]
+
+
+def _package(scene_id: str, row: sa.Row[Any]) -> StoredPackage:
+    # The projection's own canonical JSON, written from `core.baseline.baseline_package`.
+    package = cast(BaselinePackage, orjson.loads(row.body))
+    return StoredPackage(scene_id, row.version, row.seq, row.sha256, package)

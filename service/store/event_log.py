@@ -15,11 +15,12 @@ import pydantic
 import sqlalchemy as sa
 
 from core.errors import field_path
-from core.event_records import event_from_record, non_finite_field
-from core.events import BaselineSource, Event, SceneCreated
+from core.event_records import STORED_NAMES, event_from_record, non_finite_field, stored_names
+from core.events import Event, SceneCreated
 from core.evolve import fold
 from core.params import Params
 from core.state import SceneState
+from core.values import BaselineSource
 from service.store.engine import read_transaction
 from service.store.errors import (
     ConcurrencyConflict,
@@ -89,10 +90,12 @@ class SceneRecord:
 
 @dataclass(frozen=True)
 class StoredEvent:
-    """One row of the log."""
+    """One row of the log, its payload as stored: `topic` names the payload's form (the class's
+    topic, or an older form's), `type` is the event's audit type (add, update, confirm, ...)."""
 
     scene_id: str
     seq: int
+    topic: str
     type: str
     track_id: str | None
     state: str | None
@@ -104,7 +107,7 @@ class StoredEvent:
     def to_core(self) -> Event:
         """The typed core event (UnreadableEvent when the row cannot be one)."""
         return decoded_event(
-            self.seq, self.type, self.track_id, self.state, self.frame_id, self.details
+            self.seq, self.topic, self.track_id, self.state, self.frame_id, self.details
         )
 
 
@@ -115,16 +118,19 @@ def _scene(row: sa.Row[Any]) -> SceneRecord:
 
 
 def _stored(scene_id: str, row: sa.Row[Any]) -> StoredEvent:
+    details = orjson.loads(row.details)
+    topic, audit_type = stored_names(row.type, details)  # the `type` column: the stored name
     return StoredEvent(
         scene_id,
         row.seq,
-        row.type,
+        topic,
+        audit_type,
         row.track_id,
         row.state,
         row.batch_id,
         row.frame_id,
         row.recorded_at,
-        orjson.loads(row.details),
+        details,
     )
 
 
@@ -147,7 +153,7 @@ def gc_paused() -> Iterator[None]:
 
 def decoded_event(
     seq: int,
-    type_name: str,
+    stored_name: str,
     track_id: str | None,
     state: str | None,
     frame_id: str | None,
@@ -158,7 +164,7 @@ def decoded_event(
         payload = orjson.loads(details) if isinstance(details, str) else details
         return event_from_record(
             {
-                "type": type_name,
+                "topic": stored_name,
                 "track_id": track_id,
                 "state": state,
                 "frame_id": frame_id,
@@ -244,7 +250,7 @@ class EventLog:
         return {
             "scene_id": scene_id,
             "seq": seq,
-            "type": event.type,
+            "type": event.topic,
             "track_id": event.track_id,
             "state": event.state,
             "batch_id": batch_id,
@@ -309,14 +315,15 @@ class EventLog:
         event_type: str | None = None,
         connection: sa.Connection | None = None,
     ) -> list[StoredEvent]:
-        """Events with after < seq (<= up_to), in seq order, optionally filtered."""
+        """Events with after < seq (<= up_to), in seq order, optionally filtered (`event_type`:
+        an audit type, such as add or confirm, matching every topic of that type)."""
         query = sa.select(events).where(events.c.scene_id == scene_id, events.c.seq > after)
         if up_to is not None:
             query = query.where(events.c.seq <= up_to)
         if track_id is not None:
             query = query.where(events.c.track_id == track_id)
         if event_type is not None:
-            query = query.where(events.c.type == event_type)
+            query = query.where(events.c.type.in_(STORED_NAMES.get(event_type, ())))
         query = query.order_by(events.c.seq)
         if limit is not None:
             query = query.limit(limit)

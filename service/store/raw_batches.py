@@ -1,6 +1,6 @@
 """The stored form of a raw batch: compact (binary depth, zstandard) or, in older data dirs, JSON.
 
-A batch's identity is the sha256 of its canonical JSON (`service.codec.content_sha256`), kept in
+A batch's identity is the sha256 of its canonical JSON (`codec.canonical.content_sha256`), kept in
 the queue row; the blob only has to give that canonical JSON back, byte for byte. Two formats,
 told apart by their first bytes:
 

@@ -24,6 +24,7 @@ events = sa.Table(
     metadata,
     sa.Column("scene_id", sa.String(64), sa.ForeignKey("scenes.id"), primary_key=True),
     sa.Column("seq", sa.BigInteger, primary_key=True, autoincrement=False),
+    # The stored name: its class's topic (core/events.py), or an older name (core/upcasters.py).
     sa.Column("type", sa.String(32), nullable=False),
     sa.Column("track_id", sa.String(64)),
     sa.Column("state", sa.String(32)),

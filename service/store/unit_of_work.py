@@ -13,10 +13,11 @@ from dataclasses import dataclass
 
 import sqlalchemy as sa
 
-from core.events import BaselineFrozen, BaselineSource, BatchSkipped, Event
+from core.events import BaselineFrozen, BatchSkipped, Event
 from core.evolve import evolve, fold
 from core.params import Params
 from core.state import SceneState
+from core.values import BaselineSource
 from service.store.engine import write_transaction
 from service.store.event_log import EventLog, SceneRecord, snapshot_due
 from service.store.projection import last_seq_by_track, write_baseline, write_tracks

@@ -1,4 +1,4 @@
-"""The client's encoders round-trip through the service's decoders (service.codec), and its
+"""The client's encoders round-trip through the service's decoders (codec.observations), and its
 RLE is byte for byte pycocotools'."""
 
 from __future__ import annotations
@@ -13,6 +13,8 @@ from hypothesis.extra import numpy as hnp
 from pycocotools import mask as coco_mask
 
 from api_schema import Intrinsics
+from codec.observations import decode_batch
+from codec.rle import compressed_rle_counts
 from core.observation import Frame
 from pbdag_client import (
     build_batch,
@@ -24,7 +26,6 @@ from pbdag_client import (
     rle_runs,
     rle_string,
 )
-from service.codec import compressed_rle_counts, decode_batch
 
 CAMERA = Intrinsics(width=64, height=48, fx=50.0, fy=50.0, cx=31.5, cy=23.5)
 TILTED = np.array(

@@ -15,7 +15,7 @@ import numpy as np
 
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
-from core.state import Vec3
+from core.values import Vec3
 from sim.camera import CameraModel, look_at
 
 

@@ -12,7 +12,8 @@ from core.decide import decide
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
 from core.evolve import fold
 from core.inspection import decide_inspection
-from core.state import SceneState, Track, Vec3
+from core.state import SceneState, Track
+from core.values import Vec3
 from core.verification import decide_verdict
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 

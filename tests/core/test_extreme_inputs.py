@@ -19,7 +19,7 @@ from core.observation import Batch, Detection, DetectionKind, Frame, Intrinsics
 from core.params import Params
 from core.state import SceneState
 
-# The edges of the wire schema and the codec (api_schema/requests.py, service/codec.py).
+# The edges of the wire schema and the codec (api_schema/requests.py, codec/observations.py).
 FOCAL = st.one_of(st.sampled_from([1.0, 100_000.0, 20.0]), st.floats(1.0, 100_000.0))
 TRANSLATION = st.one_of(st.sampled_from([-10_000.0, 10_000.0, 0.0]), st.floats(-10_000.0, 10_000.0))
 DEPTH = st.one_of(

@@ -12,12 +12,12 @@ from tests.eval_extra import require_eval_extra
 require_eval_extra()  # the streams are rendered by the simulator
 
 from api_schema import BatchIn  # noqa: E402
+from codec.observations import decode_batch  # noqa: E402
 from core.decide import decide  # noqa: E402
 from core.evolve import fold  # noqa: E402
 from core.fixture_map import full_clusters  # noqa: E402
 from core.fixture_step import FixtureBatch, fixture_batch  # noqa: E402
 from core.state import SceneState  # noqa: E402
-from service.codec import decode_batch  # noqa: E402
 from sim.scenario import REPO_ROOT, load_scenario  # noqa: E402
 from sim.stream import iter_frames, iter_wire_batches  # noqa: E402
 from tests.conftest import SHARED_DATA  # noqa: E402

@@ -26,8 +26,8 @@ from core.occupancy import (
 )
 from core.occupancy_evidence import frame_cells, occupancy_evidence
 from core.params import Params
-from core.plan_ledger import ViewPose
 from core.state import SceneState
+from core.values import ViewPose
 from tests.core.maps import grid_of
 
 PARAMS = Params()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Unpack
 
 import numpy as np
 import pytest
@@ -16,10 +17,10 @@ from core.inspection import decide_inspection
 from core.navigation import Navigation
 from core.occupancy import OccupancyGrid
 from core.params import Params
-from core.plan_ledger import ViewPose
 from core.planner import decide_plan, inspection_queue, plan, proximity, queue_status
-from core.state import SceneState, Track
+from core.state import SceneState, Track, TrackChanges
 from core.uncertainty import TERMS, fixture_uncertainty
+from core.values import ViewPose
 from core.views import best_view, feasible_views, view_cost
 from tests.core.maps import GEOMETRY, grid_of, paint, room
 from tests.core.scenes import frame as analytic_frame
@@ -32,7 +33,8 @@ def fixture(
     track_id: str,
     center: tuple[float, float, float],
     extent: tuple[float, float, float],
-    **changes: object,
+    /,
+    **changes: Unpack[TrackChanges],
 ) -> Track:
     """A confirmed table: p_exist 0.982, one class, a clear margin, seen 12 times at one place,
     pinned (u close to 0 unless `changes` say otherwise)."""
@@ -136,7 +138,7 @@ def scene(grid: OccupancyGrid, *tracks: Track, clock: float = 400.0) -> SceneSta
 
 
 # A 7 m x 6 m room. Fixture A (uncertain) in the east, B (settled) near the robot in the west.
-UNCERTAIN = {
+UNCERTAIN: TrackChanges = {
     "existence_logodds": 0.0,
     "class_evidence": {"table": 3.0, "desk": 1.0},
     "batches_observed": 3,

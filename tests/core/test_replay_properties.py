@@ -92,5 +92,8 @@ def test_evolved_copies_fields_and_drops_the_cached_label() -> None:
     relabeled = track.evolved(class_evidence={"cup": 3.0})
     assert relabeled.label == "cup" and track.label == "mug"
     assert relabeled.to_dict() == {**track.to_dict(), "class_evidence": {"cup": 3.0}}
-    with pytest.raises(TypeError, match="no field"):
-        track.evolved(colour="red")
+    # Type checking refuses an unknown field; so does the copy at run time.
+    with pytest.raises(TypeError, match="no changeable field"):
+        track.evolved(colour="red")  # type: ignore[call-arg]
+    with pytest.raises(TypeError, match="no changeable field"):
+        track.evolved(track_id="trk-other")  # type: ignore[call-arg]

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from core.state import Vec3
+from core.values import Vec3
 from sim.camera import look_at
 from sim.detector import detect, detect_fixtures
 from sim.render import render

@@ -12,8 +12,8 @@ import pytest
 
 from core.navigation import Navigation
 from core.occupancy import MapGeometry
-from core.plan_ledger import ViewPose
 from core.planner import nearest_frontier, unresolved_fixtures
+from core.values import ViewPose
 from evaluation.active import TruthObject, coarse_shortfalls, fine_scores, score_graph
 from evaluation.active_report import at_budget
 from evaluation.predictions import PredictedNode

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from core.events import ObjectAdded, Observation, TrackRemoved
+from core.events import ObjectAdded, TrackRemoved
 from core.params import Params
 from core.rules import UpdateRules
 from core.state import SceneState, Track
+from core.values import Observation
 from evaluation.conceptgraphs import ConceptGraphsHooks, contained_share
 from evaluation.methods import (
     DYNAMIC_METHODS,

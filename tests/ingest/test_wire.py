@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from api_schema.requests import FrameIn
+from codec.observations import decode_frames
 from ingest.detectors import Detection
 from ingest.frames import CameraIntrinsics, SourceFrame
 from ingest.wire import batches, frame_in
-from service.codec import decode_frames
 
 INTRINSICS = CameraIntrinsics(width=40, height=30, fx=50.0, fy=50.0, cx=20.0, cy=15.0)
 

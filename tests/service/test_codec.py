@@ -21,7 +21,9 @@ from pycocotools import mask as coco_mask
 from pydantic import ValidationError
 
 from api_schema import BatchIn
-from service.codec import InvalidObservation, compressed_rle_counts, content_sha256, decode_batch
+from codec.canonical import content_sha256
+from codec.observations import InvalidObservation, decode_batch
+from codec.rle import compressed_rle_counts
 
 HEIGHT, WIDTH = 48, 64
 

@@ -13,8 +13,8 @@ from fastapi import FastAPI, Request
 from starlette.types import Message
 
 from api_schema import BatchIn
+from codec.observations import decode_batch
 from core.errors import NotFound, PbdagError, StateConflict, UnknownTrack, field_path
-from service.codec import decode_batch
 from service.errors import (
     INTERNAL,
     PROBLEM_MEDIA_TYPE,

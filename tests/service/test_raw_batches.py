@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from api_schema import BatchIn
-from service.codec import canonical_json
+from codec.canonical import canonical_json
 from service.store.blobs import BlobNotFound, BlobStore, FileBlobStore, MemoryBlobStore
 from service.store.raw_batches import (
     COMPACT_MARKER,

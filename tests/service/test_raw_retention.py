@@ -15,11 +15,11 @@ import pytest
 from fastapi.testclient import TestClient
 
 from api_schema import BatchIn
+from codec.canonical import canonical_json
 from service.app import create_app
 from service.auth import create_token
 from service.bootstrap import Container, build_container
 from service.cli import main
-from service.codec import canonical_json
 from service.deps import admission
 from service.repair import repair_scene
 from service.retention import collect

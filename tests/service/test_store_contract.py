@@ -9,9 +9,10 @@ from pathlib import Path
 import pytest
 import sqlalchemy as sa
 
-from core.events import Event, ObjectAdded, Observation, VisibleMiss
+from core.events import Event, ObjectAdded, VisibleMiss
 from core.params import Params
 from core.state import SceneState
+from core.values import Observation
 from service.bootstrap import Container
 from service.commands import create_scene, run_command
 from service.settings import Settings
