@@ -46,9 +46,10 @@ FORBIDDEN = {
     "service": {"sim", "evaluation", "bench", "tests"},
     "migrations": {"sim", "evaluation", "bench", "tests"},
     # The simulator produces streams and ground truth; the evaluation consumes them, never the
-    # other way round, and neither depends on the benchmarks.
-    "sim": {"evaluation", "bench", "tests"},
-    "evaluation": {"bench", "tests"},
+    # other way round, and neither depends on the benchmarks. Both decode with the codec and
+    # talk to a running service through the client, never through the service's modules.
+    "sim": {"evaluation", "bench", "tests", "service"},
+    "evaluation": {"bench", "tests", "service"},
     # The client a robot team installs: the wire models and HTTP only, never the service.
     "pbdag_client": {
         "core",
@@ -81,6 +82,8 @@ FORBIDDEN = {
         "fastapi",
     },
 }
+# Modules that drive the service on purpose: the demo serves it in its own process.
+DRIVES_THE_SERVICE = {"sim/demo_service.py": {"service"}}
 # Every package of the repository: each one's module graph, and theirs together, stay acyclic.
 PACKAGES = (
     "api_schema",
@@ -112,10 +115,11 @@ def imported_roots(path: Path) -> set[str]:
 def test_package_imports_respect_the_layers(package: str) -> None:
     modules = sorted((ROOT / package).rglob("*.py"))
     assert modules, f"{package}/ has no modules"
-    violations = {
-        str(module.relative_to(ROOT)): sorted(imported_roots(module) & FORBIDDEN[package])
-        for module in modules
-    }
+    violations = {}
+    for module in modules:
+        name = str(module.relative_to(ROOT))
+        allowed = DRIVES_THE_SERVICE.get(name, set())
+        violations[name] = sorted(imported_roots(module) & FORBIDDEN[package] - allowed)
     assert {name: bad for name, bad in violations.items() if bad} == {}
 
 
