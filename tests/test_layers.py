@@ -10,77 +10,27 @@ import networkx as nx
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
+# What only the server runs on, and the packages above the service.
+SERVER = {"service", "sqlalchemy", "fastapi", "starlette", "uvicorn", "alembic", "psycopg"}
+ABOVE = {"sim", "evaluation", "bench", "tests"}
 FORBIDDEN = {
-    "core": {
-        "service",
-        "api_schema",
-        "codec",
-        "sim",
-        "evaluation",
-        "bench",
-        "tests",
-        "sqlalchemy",
-        "fastapi",
-        "httpx",
-        "uvicorn",
-        "alembic",
-        "psycopg",
-    },
-    "api_schema": {"core", "codec", "service", "sim", "evaluation", "bench", "tests", "sqlalchemy"},
+    "core": {"api_schema", "codec", "httpx", *SERVER, *ABOVE},
+    "api_schema": {"core", "codec", "service", "sqlalchemy", *ABOVE},
     # Between the wire models and the core, for the simulator, the evaluation and any client
     # that wants the service's own decoding: it never needs the server to run.
-    "codec": {
-        "service",
-        "sim",
-        "evaluation",
-        "bench",
-        "tests",
-        "sqlalchemy",
-        "fastapi",
-        "starlette",
-        "uvicorn",
-        "alembic",
-        "psycopg",
-        "httpx",
-    },
-    "service": {"sim", "evaluation", "bench", "tests"},
-    "migrations": {"sim", "evaluation", "bench", "tests"},
+    "codec": {"httpx", *SERVER, *ABOVE},
+    "service": ABOVE,
+    "migrations": ABOVE,
     # The simulator produces streams and ground truth; the evaluation consumes them, never the
     # other way round, and neither depends on the benchmarks. Both decode with the codec and
     # talk to a running service through the client, never through the service's modules.
     "sim": {"evaluation", "bench", "tests", "service"},
     "evaluation": {"bench", "tests", "service"},
     # The client a robot team installs: the wire models and HTTP only, never the service.
-    "pbdag_client": {
-        "core",
-        "codec",
-        "service",
-        "sim",
-        "evaluation",
-        "bench",
-        "tests",
-        "sqlalchemy",
-        "fastapi",
-        "uvicorn",
-        "alembic",
-        "psycopg",
-        "scipy",
-        "open3d",
-        "pycocotools",
-    },
+    "pbdag_client": {"core", "codec", "scipy", "open3d", "pycocotools", *SERVER, *ABOVE},
     # Recorded data in, batches out over HTTP: the wire models only, never the service's insides
     # or the method itself (a user's robot has neither).
-    "ingest": {
-        "core",
-        "codec",
-        "service",
-        "sim",
-        "evaluation",
-        "bench",
-        "tests",
-        "sqlalchemy",
-        "fastapi",
-    },
+    "ingest": {"core", "codec", "service", "sqlalchemy", "fastapi", *ABOVE},
 }
 # Modules that drive the service on purpose: the demo serves it in its own process.
 DRIVES_THE_SERVICE = {"sim/demo_service.py": {"service"}}

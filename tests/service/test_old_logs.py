@@ -8,14 +8,20 @@ from pathlib import Path
 
 import orjson
 import pytest
+import sqlalchemy as sa
 
+from core.upcasters import LEGACY_NAMES
 from service.app import create_app
 from service.bootstrap import Container, build_container
 from service.cli import main
 from service.settings import Settings
 from service.store.engine import write_transaction
+from service.store.projection import rebuild_scene
+from service.store.tables import events
+from service.worker import Worker
 from tests.clients import local_client
 from tests.golden_logs import BEFORE_EVENT_TOPICS, insert_rows, voxels_digested
+from tests.wire_scenes import batch
 
 
 @pytest.fixture
@@ -102,3 +108,30 @@ def test_the_api_serves_old_rows_with_their_audit_type_and_their_topic(
         assert [e["topic"] for e in loaded] == ["baseline_loaded"]  # its payload's old form
         graph = client.get(f"/v1/scenes/{session}/graph", params={"include": "all"})
         assert graph.status_code == 200 and graph.json()["nodes"]
+
+
+def test_an_old_scene_takes_new_batches_and_its_mixed_log_rebuilds_the_same(
+    old_database: tuple[str, Container, list[str]],
+) -> None:
+    _url, container, scene_ids = old_database
+    mug = scene_ids[3]
+    old = len(BEFORE_EVENT_TOPICS.scenes()[3])
+    with local_client(create_app(container)) as client:
+        for index in (10, 11):
+            body = batch(f"new-{index}", index)
+            assert client.post(f"/v1/scenes/{mug}/batches", json=body).status_code == 202
+        assert Worker(container).drain() == 2
+        updates = client.get(
+            f"/v1/scenes/{mug}/events", params={"type": "update", "limit": 1000}
+        ).json()["events"]
+    # New rows are stored under their topics, old ones keep their names; `type=update` finds both.
+    with container.engine.connect() as connection:
+        names = connection.execute(
+            sa.select(events.c.seq, events.c.type).where(events.c.scene_id == mug)
+        ).all()
+    assert {name for seq, name in names if seq < old} >= {"add", "update"}
+    assert {name for seq, name in names if seq >= old}.isdisjoint(LEGACY_NAMES)
+    assert min(e["seq"] for e in updates) < old <= max(e["seq"] for e in updates)
+    assert {e["type"] for e in updates} == {"update"}
+    assert container.log.load_state(mug).to_dict() == container.log.replay(mug).to_dict()
+    assert rebuild_scene(container.log, mug).identical
