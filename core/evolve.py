@@ -87,41 +87,8 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
             case ObjectAdded() | FixtureAdded():
                 next_track_number += 1
                 tracks[event.track_id] = _observe(_new_track(event), event, params)
-            case ObjectObserved() | FixtureObserved():
-                tracks[event.track_id] = _observe(tracks[event.track_id], event, params)
-            case ObjectReidentified():
-                tracks[event.track_id] = _reidentify(tracks[event.track_id], event, params)
-            case VisibleMiss():
-                # A visibility-admissible miss: only existence and the miss count change.
-                tracks[event.track_id] = tracks[event.track_id].evolved(
-                    existence_logodds=event.existence_logodds,
-                    visible_misses=event.visible_misses,
-                    lifecycle=event.state,
-                )
-            case TrackConfirmed():
-                track = tracks[event.track_id]
-                published = track.published_center or event.center
-                tracks[event.track_id] = track.evolved(
-                    lifecycle="confirmed", published_center=published
-                )
-            case TrackMoved():
-                track = tracks[event.track_id]
-                # Moved: what it covered before is no longer where it is.
-                tracks[event.track_id] = track.evolved(
-                    published_center=event.to, box=_box([(track.center, track.extent)])
-                )
-            case TrackReparented():
-                tracks[event.track_id] = tracks[event.track_id].evolved(parent=event.new_parent)
-            case TrackRemoved():
-                tracks[event.track_id] = tracks[event.track_id].evolved(
-                    lifecycle=event.state, capture_id=None
-                )
-            case TrackDemoted() | TrackRetired():
-                tracks[event.track_id] = tracks[event.track_id].evolved(lifecycle=event.state)
-            case VerificationRequested():
-                tracks[event.track_id] = tracks[event.track_id].evolved(verification="pending")
-            case TrackVerified():
-                tracks[event.track_id] = _apply_verdict(tracks[event.track_id], event, params)
+            case _ if isinstance(event, TrackChange):
+                tracks[event.track_id] = _changed(tracks[event.track_id], event, params)
             case InspectionRecorded():
                 tracks[event.track_id] = tracks[event.track_id].evolved(
                     inspection_status=event.status, inspection_attempts=event.attempts
@@ -145,6 +112,59 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
         clock=clock,
         plan=plan,
     ).with_arrays_from(state, touched)
+
+
+# The events that change only their own track, from that track alone.
+TrackChange = (
+    ObjectObserved
+    | FixtureObserved
+    | ObjectReidentified
+    | VisibleMiss
+    | TrackConfirmed
+    | TrackMoved
+    | TrackReparented
+    | TrackDemoted
+    | TrackRemoved
+    | TrackRetired
+    | VerificationRequested
+    | TrackVerified
+)
+
+
+def _changed(track: Track, event: TrackChange, params: Params) -> Track:
+    """The track after an event that changes it alone."""
+    match event:
+        case ObjectObserved() | FixtureObserved():
+            return _observe(track, event, params)
+        case ObjectReidentified():
+            return _reidentify(track, event, params)
+        case VisibleMiss():
+            # A visibility-admissible miss: only existence and the miss count change.
+            return track.evolved(
+                existence_logodds=event.existence_logodds,
+                visible_misses=event.visible_misses,
+                lifecycle=event.state,
+            )
+        case TrackConfirmed():
+            published = track.published_center or event.center
+            return track.evolved(lifecycle="confirmed", published_center=published)
+        case TrackMoved():
+            # Moved: what it covered before is no longer where it is.
+            return track.evolved(
+                published_center=event.to, box=_box([(track.center, track.extent)])
+            )
+        case TrackReparented():
+            return track.evolved(parent=event.new_parent)
+        case TrackRemoved():
+            return track.evolved(lifecycle=event.state, capture_id=None)
+        case TrackDemoted() | TrackRetired():
+            return track.evolved(lifecycle=event.state)
+        case VerificationRequested():
+            return track.evolved(verification="pending")
+        case TrackVerified():
+            return _apply_verdict(track, event, params)
+        case _:
+            assert_never(event)
 
 
 def _after_capture(plan: PlanLedger, event: InspectionRecorded) -> PlanLedger:

@@ -84,27 +84,36 @@ def baseline_fixture_v1(record: Mapping[str, Any]) -> dict[str, Any]:
 def upcast_baseline_loaded_v1_v2(details: Mapping[str, Any]) -> tuple[str, dict[str, Any]]:
     """v1 stored each fixture as a whole track record; v2 stores its baseline record.
 
-    Every other field of a v1 fixture must hold what loading gives it (a field an older v1
-    lacks read as its start value, which is falsy), or the row is refused.
+    Every other field of a v1 fixture must hold what loading gives it, or the row is refused.
     """
     fixtures = []
     for index, stored in enumerate(details["fixtures"]):
         record = {key: stored[key] for key in _V1_RECORD_FIELDS}
-        loaded = baseline_fixture_v1(record)
-        unknown = sorted(stored.keys() - loaded.keys() - {"box", "capture_id"})
-        differing = sorted(
-            key
-            for key, value in loaded.items()
-            if stored.get(key, value if not value else None) != value
-        )
-        differing += [key for key in ("box", "capture_id") if stored.get(key) is not None]
-        if unknown or differing:
+        extra = _v1_differences(stored, baseline_fixture_v1(record))
+        if extra:
             raise ValueError(
-                f"details.fixtures[{index}]: a v1 baseline_loaded fixture holding "
-                f"{unknown + differing} is not a loaded baseline fixture"
+                f"details.fixtures[{index}]: a v1 baseline_loaded fixture holding {extra} "
+                "is not a loaded baseline fixture"
             )
         fixtures.append(record)
     return "baseline_loaded_v2", {**details, "fixtures": fixtures}
+
+
+def _v1_differences(stored: Mapping[str, Any], loaded: Mapping[str, Any]) -> list[str]:
+    """The fields of a stored v1 fixture that loading would not give it. A field an older v1
+    lacks was read as its start value (all of them falsy); `box` and `capture_id` were stored
+    only when set."""
+    differing = []
+    for key in sorted(stored.keys() | loaded.keys()):
+        if key in ("box", "capture_id"):
+            wrong = stored.get(key) is not None
+        elif key not in loaded:
+            wrong = True
+        else:
+            wrong = stored[key] != loaded[key] if key in stored else bool(loaded[key])
+        if wrong:
+            differing.append(key)
+    return differing
 
 
 # Old topic -> the upcaster of its payload to the next version's (topic, payload).
