@@ -4,16 +4,17 @@ The log is append-only: a row keeps the name and payload it was written with. Re
 steps bring it to today's form (core/event_records.py applies them):
 
 1. Its topic. Before each class had a topic of its own, six classes were stored under two
-   names, told apart by their payload; `topic_of` names them. Their payloads are today's.
+   names and told apart by their payload; `upcast_add` and `upcast_update` name them. Their
+   payloads are today's.
 
-   | stored name | payload                                   | topic                 |
-   |-------------|-------------------------------------------|-----------------------|
-   | `add`       | `kind` "object"                           | `object_added`        |
-   | `add`       | `kind` "fixture"                          | `fixture_added`       |
-   | `update`    | `evidence` "visible_miss"                 | `visible_miss`        |
-   | `update`    | `evidence` "reidentified"                 | `object_reidentified` |
-   | `update`    | `evidence` "observed", a fixture's `center` | `fixture_observed`  |
-   | `update`    | `evidence` "observed", no `center`        | `object_observed`     |
+   | stored name | payload                              | topic                 |
+   |-------------|--------------------------------------|-----------------------|
+   | `add`       | `kind` "object"                      | `object_added`        |
+   | `add`       | `kind` "fixture"                     | `fixture_added`       |
+   | `update`    | `evidence` "visible_miss"            | `visible_miss`        |
+   | `update`    | `evidence` "reidentified"            | `object_reidentified` |
+   | `update`    | `evidence` "observed", with `center` | `fixture_observed`    |
+   | `update`    | `evidence` "observed", no `center`   | `object_observed`     |
 
    Every other stored name is the topic of one class.
 2. Its payload. A topic whose payload changed form names the old form; `UPCASTERS` turns such
@@ -29,23 +30,37 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
-# What a v1 `baseline_loaded` stored for each fixture beyond its baseline record: the whole
-# in-memory track record of a loaded fixture, in the order it was stored.
+# The fields of a v1 `baseline_loaded` fixture that make its baseline record (the others hold
+# what loading gives a fixture).
 _V1_RECORD_FIELDS = ("track_id", "class_evidence", "existence_logodds", "center", "extent")
 
 
+def upcast_add(details: Mapping[str, Any]) -> str:
+    """The topic of a row stored under `add`."""
+    return "fixture_added" if details.get("kind") == "fixture" else "object_added"
+
+
+def upcast_update(details: Mapping[str, Any]) -> str:
+    """The topic of a row stored under `update` (only a fixture's observation has a `center`)."""
+    evidence = details.get("evidence")
+    if evidence == "visible_miss":
+        return "visible_miss"
+    if evidence == "reidentified":
+        return "object_reidentified"
+    return "fixture_observed" if "center" in details else "object_observed"
+
+
+# Old names shared by several classes -> the upcaster naming a row's class from its payload.
+SHARED_NAMES: Mapping[str, Callable[[Mapping[str, Any]], str]] = {
+    "add": upcast_add,
+    "update": upcast_update,
+}
+
+
 def topic_of(stored_name: str, details: Mapping[str, Any]) -> str:
-    """The topic of a row stored under `stored_name` (the table above; others are topics)."""
-    if stored_name == "add":
-        return "fixture_added" if details.get("kind") == "fixture" else "object_added"
-    if stored_name == "update":
-        evidence = details.get("evidence")
-        if evidence == "visible_miss":
-            return "visible_miss"
-        if evidence == "reidentified":
-            return "object_reidentified"
-        return "fixture_observed" if "center" in details else "object_observed"
-    return stored_name
+    """The topic of a row stored under `stored_name` (a shared old name, or a topic)."""
+    upcaster = SHARED_NAMES.get(stored_name)
+    return stored_name if upcaster is None else upcaster(details)
 
 
 def baseline_fixture_v1(record: Mapping[str, Any]) -> dict[str, Any]:
