@@ -16,9 +16,9 @@ from PIL import Image
 
 from api_schema import BatchIn, DepthImage, DetectionIn, FrameIn, RleMask
 from codec.rle import compressed_rle_counts
-from core.errors import PbdagError
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
+from pbdag_errors import Refused
 
 SIXTEEN_BIT_PNG_MODES = frozenset({"I;16", "I;16B", "I"})
 # Tolerances of the rigid-pose check: float32 round trips on the client stay well inside them.
@@ -28,7 +28,7 @@ POSE_LAST_ROW_ATOL = 1e-6
 ROTATION_ATOL = 1e-3
 
 
-class InvalidObservation(PbdagError):
+class InvalidObservation(Refused):
     """A structurally valid observation whose content cannot be decoded or is not physical."""
 
     def __init__(self, field: str, reason: str) -> None:

@@ -1,8 +1,8 @@
-"""Errors a client can cause, each naming the field it is about; the service maps them to HTTP.
+"""The errors of the method: what a command or a parameter override asks that cannot be done.
 
-Every error the service reports derives from `PbdagError`: a plain detail (never echoing large
-input) and the offending field as a path (`frames[0].pose`, `params.visibility.depth_window_px`).
-The service's one problem table (service/errors.py) gives each class its HTTP status.
+Each names the field it is about. They are `Refused` errors of the one hierarchy
+(`pbdag_errors`): nothing was changed. The service's one problem table (service/errors.py) gives
+each class its HTTP answer.
 """
 
 from __future__ import annotations
@@ -11,29 +11,19 @@ import json
 import re
 from collections.abc import Sequence
 
+from pbdag_errors import Refused
+
 _IDENTIFIER = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 
 
-class PbdagError(Exception):
-    """Base of every reported error: nothing was changed by the request that raised it."""
-
-    def __init__(
-        self, detail: str, field: str | None = None, headers: dict[str, str] | None = None
-    ) -> None:
-        super().__init__(detail)
-        self.detail = detail
-        self.field = field
-        self.headers = headers or {}
-
-
-class NotFound(PbdagError):
+class NotFound(Refused):
     """A named resource (batch, track, baseline...) does not exist."""
 
     def __init__(self, what: str, id: str, field: str | None = None) -> None:
         super().__init__(f"{what} '{id}' does not exist", field)
 
 
-class DomainError(PbdagError):
+class DomainError(Refused):
     """A command that the scene's state does not allow; nothing is appended."""
 
 

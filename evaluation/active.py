@@ -116,7 +116,7 @@ def fine_shortfalls(result: RolloutResult) -> list[str]:
     from the memory's tracks (published or not) near the object."""
     predicted = nodes(result.final_graph)
     coarse = fixture_scores(result.truth_fixtures, predicted, COARSE_MATCH_M)
-    inspected = {c.fixture_id for c in result.captures if c.outcome == "completed"}
+    inspected = {c.fixture_id for c in result.captures if c.completed}
     objects = [t for t in result.final_tracks if t.kind == "object"]
     matched_tracks: set[str] = set()
     lines: list[str] = []
@@ -284,12 +284,12 @@ def run_row(
         **scores,
         "fine_f1_after_inspections": budget_curve,
         "inspections": [
-            {"fixture_id": c.fixture_id, "outcome": c.outcome, "view": list(c.view)}
+            {"fixture_id": c.fixture_id, "outcome": c.outcome.text, "view": list(c.view)}
             for c in result.captures
         ],
         # Captures the memory refused (nothing recorded): no inspection, not in the budget.
         "refused_captures": [
-            {"fixture_id": c.fixture_id, "outcome": c.outcome, "view": list(c.view)}
+            {"fixture_id": c.fixture_id, "outcome": c.outcome.text, "view": list(c.view)}
             for c in result.refused
         ],
         "fine_shortfalls": fine_shortfalls(result),

@@ -193,7 +193,7 @@ def map_figure(result: RolloutResult, path: Path) -> Path:
     trail = np.asarray(result.path)
     axis.plot(trail[:, 0], trail[:, 1], "-", color="tab:blue", lw=1, label="path")
     for capture in result.captures:
-        colour = "tab:green" if capture.outcome == "completed" else "tab:red"
+        colour = "tab:green" if capture.completed else "tab:red"
         axis.plot(capture.view[0], capture.view[1], "o", color=colour, ms=5)
     for capture in result.refused:
         axis.plot(capture.view[0], capture.view[1], "x", color="tab:red", ms=6)

@@ -16,6 +16,7 @@ from core.params import FixtureParams, deep_merge
 from core.rules import UpdateRules
 from evaluation.conceptgraphs import ConceptGraphsHooks
 from evaluation.hooks import RunnerHooks
+from pbdag_errors import Refused
 
 # Publish on the first sighting: one batch and p_exist 0.73 after eta_o suffice.
 IMMEDIATE = {"confirm_min_batches": 1, "confirm_min_p_exist": 0.5}
@@ -34,7 +35,7 @@ UNVERIFIED_FIXTURES = {
 }
 
 
-class MethodUnavailable(RuntimeError):
+class MethodUnavailable(Refused, RuntimeError):
     """A method whose update rule this core does not offer yet."""
 
 

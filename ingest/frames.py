@@ -10,14 +10,18 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from pbdag_errors import Refused
 
-class IngestError(Exception):
+
+class IngestError(Refused):
     """A problem with the user's input (a missing file or topic, a bad option): a clear message,
     no traceback."""
 
 
 class SkipFrame(Exception):
     """Raised by a detector (or a source) when a frame cannot be used; the reason is counted.
+    A signal within `ingest`, not an error: it never leaves the source, so it stays outside the
+    project's hierarchy.
 
     A frame without its detections must not be sent with none: the service would take every
     object in view as missed.

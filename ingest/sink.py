@@ -16,15 +16,16 @@ import httpx
 
 from api_schema.requests import BatchIn
 from api_schema.responses import BatchStatus
-from pbdag_client import Client, PbdagError, RateLimited, ServerError
+from pbdag_client import ApiError, Client, RateLimited, ServerError
 from pbdag_client.errors import retry_after_seconds
+from pbdag_errors import PbdagError
 
 FINAL_STATUSES = frozenset({"done", "dead"})
 # A full queue (429) or a busy database (503) says when to come back; give up after this long.
 MAX_BACKOFF_SECONDS = 600.0
 
 
-class SinkError(Exception):
+class SinkError(PbdagError):
     """The service refused a request or could not be reached; the message says why."""
 
 
@@ -45,7 +46,7 @@ class SinkResult:
 _T = TypeVar("_T")
 
 
-def _readable(error: PbdagError, action: str) -> SinkError:
+def _readable(error: ApiError, action: str) -> SinkError:
     """A refused request as one line: what was asked, the status, the detail and the field."""
     where = f" (field {error.field})" if error.field else ""
     return SinkError(f"{action}: HTTP {error.status}: {error.detail}{where}")
@@ -69,7 +70,7 @@ def _call(
             waited += delay
             if result is not None:
                 result.busy_retries += 1
-        except PbdagError as error:
+        except ApiError as error:
             raise _readable(error, action) from error
         except httpx.TransportError as error:
             raise SinkError(f"{action}: cannot reach {client.base_url}: {error}") from error

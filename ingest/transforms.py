@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
+from pbdag_errors import Refused
+
 Matrix = npt.NDArray[np.float64]
 
 
@@ -78,7 +80,7 @@ class TimedTransforms:
         return None if index is None else self.matrices[index]
 
 
-class TransformLookupError(Exception):
+class TransformLookupError(Refused):
     """A transform chain that cannot be composed at a stamp; the message says which link."""
 
 

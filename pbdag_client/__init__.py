@@ -3,8 +3,9 @@
     from pbdag_client import Client, build_batch, build_frame, detection
 
 Requests and answers are the `api_schema` models; error answers raise the typed exceptions of
-`pbdag_client.errors`; `pbdag_client.encoding` turns numpy depth images and boolean masks into
-the wire's png16 depth and COCO RLE. It needs api_schema, httpx, numpy and pillow only.
+`pbdag_client.errors` (each a `PbdagError`, the root of the project's one hierarchy, from
+`pbdag_errors`); `pbdag_client.encoding` turns numpy depth images and boolean masks into the
+wire's png16 depth and COCO RLE. It needs api_schema, pbdag_errors, httpx, numpy and pillow only.
 """
 
 from pbdag_client.client import DEFAULT_TIMEOUT_S, AsyncClient, Client, Submitted
@@ -20,6 +21,7 @@ from pbdag_client.encoding import (
 )
 from pbdag_client.errors import (
     AccessDenied,
+    ApiError,
     BadRequest,
     BatchDead,
     BatchTimeout,
@@ -27,10 +29,11 @@ from pbdag_client.errors import (
     Forbidden,
     InsufficientStorage,
     InvalidRequest,
-    NotFound,
     PayloadTooLarge,
     PbdagError,
     RateLimited,
+    RequestRefused,
+    ResourceNotFound,
     ServerError,
     Unauthorized,
 )
@@ -38,6 +41,7 @@ from pbdag_client.errors import (
 __all__ = [
     "DEFAULT_TIMEOUT_S",
     "AccessDenied",
+    "ApiError",
     "AsyncClient",
     "BadRequest",
     "BatchDead",
@@ -47,10 +51,11 @@ __all__ = [
     "Forbidden",
     "InsufficientStorage",
     "InvalidRequest",
-    "NotFound",
     "PayloadTooLarge",
     "PbdagError",
     "RateLimited",
+    "RequestRefused",
+    "ResourceNotFound",
     "ServerError",
     "Submitted",
     "Unauthorized",

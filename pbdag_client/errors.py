@@ -1,8 +1,11 @@
 """The service's problem+json answers (RFC 9457) as typed exceptions, one class per status.
 
 Every error answer of the API is a `Problem` document naming the offending field; `problem_error`
-turns a response into the exception of its status, carrying that document's members. Transport
-failures (refused connection, timeout) stay httpx's own `httpx.TransportError`s.
+turns a response into the exception of its status, carrying that document's members. The classes
+mirror the project's one hierarchy (`pbdag_errors`) without redefining its names: `ApiError` is a
+`PbdagError`, a 4xx answer (`RequestRefused` and below) is a `Refused`, a 5xx (`ServerError`) a
+`Failure`. Transport failures (refused connection, timeout) stay httpx's own
+`httpx.TransportError`s.
 """
 
 from __future__ import annotations
@@ -14,9 +17,11 @@ import httpx
 from pydantic import ValidationError
 
 from api_schema import BatchStatus, Problem, ProblemField
+from pbdag_errors import Failure, PbdagError, Refused
 
 __all__ = [
     "AccessDenied",
+    "ApiError",
     "BadRequest",
     "BatchDead",
     "BatchTimeout",
@@ -24,17 +29,18 @@ __all__ = [
     "Forbidden",
     "InsufficientStorage",
     "InvalidRequest",
-    "NotFound",
     "PayloadTooLarge",
     "PbdagError",
     "RateLimited",
+    "RequestRefused",
+    "ResourceNotFound",
     "ServerError",
     "Unauthorized",
     "problem_error",
 ]
 
 
-class PbdagError(Exception):
+class ApiError(PbdagError):
     """An error answer of the service: its status and problem document (type, title, detail,
     the offending field and every offending field)."""
 
@@ -48,14 +54,15 @@ class PbdagError(Exception):
         errors: list[ProblemField] | None = None,
         headers: httpx.Headers | None = None,
     ) -> None:
-        super().__init__(f"HTTP {status} {title}: {detail}")
+        super().__init__(detail, field)
         self.status = status
         self.type = type
         self.title = title
-        self.detail = detail
-        self.field = field
         self.errors: list[ProblemField] = errors if errors is not None else []
         self.headers = headers if headers is not None else httpx.Headers()
+
+    def __str__(self) -> str:
+        return f"HTTP {self.status} {self.title}: {self.detail}"
 
     @property
     def fields(self) -> list[str]:
@@ -64,11 +71,15 @@ class PbdagError(Exception):
         return named + [e.field for e in self.errors if e.field and e.field not in named]
 
 
-class BadRequest(PbdagError):
+class RequestRefused(ApiError, Refused):
+    """4xx, and the 507 of a full quota: the service refused the request and changed nothing."""
+
+
+class BadRequest(RequestRefused):
     """400: e.g. a Host name the service does not accept."""
 
 
-class AccessDenied(PbdagError):
+class AccessDenied(RequestRefused):
     """401 or 403: no valid token, or a token without the scope the request needs."""
 
 
@@ -80,23 +91,23 @@ class Forbidden(AccessDenied):
     """403: the token lacks the scope (read, write, admin) the request needs."""
 
 
-class NotFound(PbdagError):
+class ResourceNotFound(RequestRefused):
     """404: no such scene, batch, track, baseline or seq."""
 
 
-class Conflict(PbdagError):
+class Conflict(RequestRefused):
     """409: new content under an old batch_id, a repeated verdict, a quarantined scene..."""
 
 
-class PayloadTooLarge(PbdagError):
+class PayloadTooLarge(RequestRefused):
     """413: the request body is over the service's size limit."""
 
 
-class InvalidRequest(PbdagError):
+class InvalidRequest(RequestRefused):
     """422: a request the service cannot accept; `field` names the offending field."""
 
 
-class RateLimited(PbdagError):
+class RateLimited(RequestRefused):
     """429: too many requests, or the scene's queue is full; retry after `retry_after` seconds."""
 
     @property
@@ -105,19 +116,20 @@ class RateLimited(PbdagError):
         return retry_after_seconds(self.headers.get("retry-after"))
 
 
-class InsufficientStorage(PbdagError):
-    """507: the scene is over its byte quota."""
+class InsufficientStorage(RequestRefused):
+    """507: the scene is over its byte quota (a 5xx status, but a limit of the scene, not a
+    failure of the service: nothing was changed, and the request is refused until space frees)."""
 
 
-class ServerError(PbdagError):
+class ServerError(ApiError, Failure):
     """5xx: the service failed (the request may be retried later)."""
 
 
-_BY_STATUS: dict[int, type[PbdagError]] = {
+_BY_STATUS: dict[int, type[ApiError]] = {
     400: BadRequest,
     401: Unauthorized,
     403: Forbidden,
-    404: NotFound,
+    404: ResourceNotFound,
     409: Conflict,
     413: PayloadTooLarge,
     422: InvalidRequest,
@@ -126,14 +138,16 @@ _BY_STATUS: dict[int, type[PbdagError]] = {
 }
 
 
-def error_class(status: int) -> type[PbdagError]:
+def error_class(status: int) -> type[ApiError]:
     """The exception class of an HTTP error status."""
     if status in _BY_STATUS:
         return _BY_STATUS[status]
-    return ServerError if status >= 500 else PbdagError
+    if status >= 500:
+        return ServerError
+    return RequestRefused if status >= 400 else ApiError
 
 
-def problem_error(response: httpx.Response) -> PbdagError:
+def problem_error(response: httpx.Response) -> ApiError:
     """The typed exception of an error response (a problem+json document, or any other body)."""
     cls = error_class(response.status_code)
     try:
@@ -169,23 +183,25 @@ def retry_after_seconds(value: str | None) -> float | None:
     return max(0.0, when.timestamp() - time.time())
 
 
-class BatchDead(RuntimeError):
+class BatchDead(PbdagError, RuntimeError):
     """A batch that failed every attempt (`dead`): the service keeps its error."""
 
     def __init__(self, batch: BatchStatus) -> None:
         super().__init__(
             f"batch {batch.batch_id} of scene {batch.scene_id} is dead after "
-            f"{batch.attempts} attempts: {batch.error}"
+            f"{batch.attempts} attempts: {batch.error}",
+            "batch_id",
         )
         self.batch = batch
 
 
-class BatchTimeout(TimeoutError):
+class BatchTimeout(PbdagError, TimeoutError):
     """A batch still queued or running when the wait ran out."""
 
     def __init__(self, batch: BatchStatus, timeout_s: float) -> None:
         super().__init__(
             f"batch {batch.batch_id} of scene {batch.scene_id} still {batch.status} "
-            f"after {timeout_s:g} s"
+            f"after {timeout_s:g} s",
+            "batch_id",
         )
         self.batch = batch

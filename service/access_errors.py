@@ -1,19 +1,19 @@
 """The errors of the LAN boundary: unknown Host, missing or bad token, missing scope, rate limit,
 a body over the limit.
 
-Each carries the response headers HTTP asks for (WWW-Authenticate, Retry-After); their statuses
-are in the one problem table (service/errors.py).
+Each keeps what its answer needs (the token error, the scope, the seconds to wait); the statuses
+and the headers HTTP asks for (WWW-Authenticate, Retry-After) are in the one problem table
+(service/errors.py).
 """
 
 from __future__ import annotations
 
-from core.errors import PbdagError
+from pbdag_errors import Refused
 
 AUTH_FIELD = "authorization"  # the request header a token problem is about
-REALM = 'realm="pbdag"'
 
 
-class AccessProblem(PbdagError):
+class AccessProblem(Refused):
     """Base of the access errors."""
 
 
@@ -28,36 +28,35 @@ class HostNotAllowed(AccessProblem):
         )
 
 
-class Unauthorized(AccessProblem):
-    """No token, or one that is malformed, unknown or revoked (RFC 6750 section 3)."""
+class NotAuthenticated(AccessProblem):
+    """No token, or one that is malformed, unknown or revoked (RFC 6750 section 3); `token_error`
+    is RFC 6750's error code when a token was sent."""
 
-    def __init__(self, detail: str, *, error: str | None = None) -> None:
-        challenge = f"Bearer {REALM}" + (f', error="{error}"' if error else "")
-        super().__init__(detail, AUTH_FIELD, {"WWW-Authenticate": challenge})
+    def __init__(self, detail: str, *, token_error: str | None = None) -> None:
+        super().__init__(detail, AUTH_FIELD)
+        self.token_error = token_error
 
 
-class Forbidden(AccessProblem):
+class InsufficientScope(AccessProblem):
     """A valid client without the scope the request needs."""
 
     def __init__(self, detail: str, *, needed: str) -> None:
-        challenge = f'Bearer {REALM}, error="insufficient_scope", scope="{needed}"'
-        super().__init__(detail, AUTH_FIELD, {"WWW-Authenticate": challenge})
+        super().__init__(detail, AUTH_FIELD)
         self.needed = needed
 
 
-class RateLimited(AccessProblem):
+class RateLimitExceeded(AccessProblem):
     """Too many requests from one token (or one address): retry after `retry_after` seconds."""
 
     def __init__(self, retry_after: int, *, per_minute: int, field: str | None) -> None:
         super().__init__(
             f"rate limit of {per_minute} requests per minute exceeded; retry in {retry_after} s",
             field,
-            {"Retry-After": str(retry_after)},
         )
         self.retry_after = retry_after
 
 
-class PayloadTooLarge(AccessProblem):
+class BodyTooLarge(AccessProblem):
     """The request body is larger than the service accepts."""
 
     def __init__(self, max_bytes: int) -> None:

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from core.errors import PbdagError
+from pbdag_errors import PbdagError
 from service.settings import Settings
 
 if TYPE_CHECKING:

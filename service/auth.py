@@ -23,21 +23,19 @@ from typing import Annotated, Literal
 import sqlalchemy as sa
 from fastapi import Depends, Request
 
-from service.access_errors import Forbidden, RateLimited, Unauthorized
+from pbdag_errors import Refused
+from service.access_errors import InsufficientScope, NotAuthenticated
 from service.store.engine import read_transaction, write_transaction
 from service.store.tables import api_tokens
 
 __all__ = [
     "ANONYMOUS_LOCAL_SCOPES",
     "SCOPES",
-    "Forbidden",
     "NewToken",
     "Principal",
-    "RateLimited",
     "RequireAdmin",
     "Scope",
     "TokenRecord",
-    "Unauthorized",
     "UnknownToken",
     "authenticate",
     "authorize",
@@ -124,11 +122,11 @@ class NewToken:
     token: str
 
 
-class UnknownToken(LookupError):
-    """No token with this id."""
+class UnknownToken(Refused, LookupError):
+    """No token with this id (`pbdag token revoke`; never a request's answer)."""
 
     def __init__(self, token_id: str) -> None:
-        super().__init__(f"no token with id {token_id!r}")
+        super().__init__(f"no token with id {token_id!r}", "token_id")
         self.token_id = token_id
 
 
@@ -299,7 +297,7 @@ def authenticate(
     engine: sa.Engine,
     allow_anonymous_local: bool,
 ) -> Principal:
-    """Who sends this request; raises Unauthorized when nobody acceptable does.
+    """Who sends this request; raises NotAuthenticated when nobody acceptable does.
 
     A presented token must be valid even from loopback: anonymous access never papers over a
     bad token.
@@ -307,20 +305,20 @@ def authenticate(
     if authorization is None:
         if allow_anonymous_local and is_loopback(client_host):
             return Principal("anonymous-local", ANONYMOUS_LOCAL_SCOPES, address_key(client_host))
-        raise Unauthorized(
+        raise NotAuthenticated(
             "this request needs a bearer token: send `Authorization: Bearer <token>` "
             "(an operator creates one with `pbdag token create`)"
         )
     token = _bearer_credentials(authorization)
     if token is None:
-        raise Unauthorized(
-            "the Authorization header must be `Bearer <token>`", error="invalid_request"
+        raise NotAuthenticated(
+            "the Authorization header must be `Bearer <token>`", token_error="invalid_request"
         )
     record = verify_token(engine, token)
     if record is None:
-        raise Unauthorized("the bearer token is not valid", error="invalid_token")
+        raise NotAuthenticated("the bearer token is not valid", token_error="invalid_token")
     if not record.active:
-        raise Unauthorized("the bearer token was revoked", error="invalid_token")
+        raise NotAuthenticated("the bearer token was revoked", token_error="invalid_token")
     return Principal(
         "token",
         effective_scopes(record.scopes),
@@ -331,10 +329,10 @@ def authenticate(
 
 
 def authorize(principal: Principal, needed: Scope) -> None:
-    """Raise Forbidden unless the principal holds `needed` (directly or implied)."""
+    """Raise InsufficientScope unless the principal holds `needed` (directly or implied)."""
     if needed not in principal.scopes:
         held = ", ".join(scope for scope in SCOPES if scope in principal.scopes) or "none"
-        raise Forbidden(
+        raise InsufficientScope(
             f"this request needs the '{needed}' scope; {principal.describe()} has: {held}",
             needed=needed,
         )
@@ -350,7 +348,7 @@ def require_scope(needed: Scope) -> Callable[[Request], Awaitable[Principal]]:
         principal = getattr(request.state, "principal", None)
         if not isinstance(principal, Principal):
             # Fail closed: an app without AccessControl in front never serves a scoped route.
-            raise Unauthorized("this request needs a bearer token")
+            raise NotAuthenticated("this request needs a bearer token")
         authorize(principal, needed)
         return principal
 

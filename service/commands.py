@@ -2,7 +2,7 @@
 
 They share the worker's write path (the unit of work). A concurrent append by the worker or
 another request moves the head, and the command is decided again on the new head (optimistic
-concurrency).
+concurrency, `UnitOfWork.on_the_head`).
 """
 
 from __future__ import annotations
@@ -16,26 +16,22 @@ from core.params import Params
 from core.state import SceneState
 from core.values import BaselineSource
 from service.bootstrap import Container
-from service.store.errors import ConcurrencyConflict
 from service.store.event_log import SceneRecord
-from service.store.unit_of_work import Appended
-
-ATTEMPTS = 5
+from service.store.unit_of_work import Appended, Writes
 
 
 def run_command(
     container: Container, scene_id: str, decide_command: Callable[[SceneState], Sequence[Event]]
 ) -> tuple[list[Event], Appended]:
-    """Decide on the current head and append; decided again when the head moved meanwhile."""
-    for _attempt in range(ATTEMPTS):
-        state = container.log.load_state(scene_id)
-        new_events = list(decide_command(state))  # domain errors propagate: nothing appended
-        try:
-            with container.uow.begin() as work:
-                return new_events, work.append(scene_id, state, new_events)
-        except ConcurrencyConflict:
-            continue
-    raise ConcurrencyConflict(f"scene {scene_id!r} kept changing; try again", "scene_id")
+    """Decide on the current head and append; decided again when the head moved meanwhile.
+    A refused command (a domain error) propagates: nothing is appended."""
+
+    def append(
+        work: Writes, state: SceneState, events: list[Event]
+    ) -> tuple[list[Event], Appended]:
+        return events, work.append(scene_id, state, events)
+
+    return container.uow.on_the_head(scene_id, lambda state: list(decide_command(state)), append)
 
 
 def create_scene(

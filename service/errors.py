@@ -1,14 +1,17 @@
 """HTTP errors as RFC 9457 problem+json: one table from exception class to HTTP answer.
 
-Every error a client can cause derives from `core.errors.PbdagError` and carries its detail and
-its field; `PROBLEMS` gives each class its status, title and problem type, looked up along the
-exception's class hierarchy (as Starlette looks up exception handlers). Nothing parses messages.
+Every error a client can cause is a `pbdag_errors.Refused` and carries its detail and its field;
+`PROBLEMS` gives each class its status, title and problem type, looked up along the exception's
+class hierarchy (as Starlette looks up exception handlers), and `headers_of` the headers HTTP
+asks for. A `Failure` (the store failed) and anything else is a 500 that names nothing internal.
+Nothing parses messages; nothing outside this module knows HTTP's statuses or headers.
 """
 
 from __future__ import annotations
 
 import http
 import json
+import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -25,30 +28,30 @@ from core.errors import (
     InvalidCommand,
     InvalidParams,
     NotFound,
-    PbdagError,
     StateConflict,
     UnknownTrack,
     field_path,
 )
+from pbdag_errors import Failure, PbdagError
 from service.access_errors import (
-    Forbidden,
+    BodyTooLarge,
     HostNotAllowed,
-    PayloadTooLarge,
-    RateLimited,
-    Unauthorized,
+    InsufficientScope,
+    NotAuthenticated,
+    RateLimitExceeded,
 )
 from service.store.errors import (
     BatchConflict,
     ConcurrencyConflict,
-    SceneNotFound,
     SceneQuarantined,
     SeqOutOfRange,
-    StoreError,
     UnreadableEvent,
 )
 from service.store.queue_records import NotRequeueable, QueueFull, QuotaExceeded, RawBatchCollected
 
+logger = logging.getLogger("pbdag.api")
 PROBLEM_MEDIA_TYPE = "application/problem+json"
+REALM = 'realm="pbdag"'  # of the bearer challenges (RFC 6750 section 3)
 
 
 @dataclass(frozen=True)
@@ -62,13 +65,13 @@ class Problem:
 
 INTERNAL = Problem(500, "Internal Server Error", "/problems/internal-error")
 
-# The one table. More specific classes win over their bases.
+# The one table: what a client can cause (`Refused`), then what the server fails at (`Failure`).
+# More specific classes win over their bases.
 PROBLEMS: dict[type[Exception], Problem] = {
     HostNotAllowed: Problem(400, "Host not allowed", "/problems/host-not-allowed"),
-    Unauthorized: Problem(401, "Unauthorized", "/problems/unauthorized"),
-    Forbidden: Problem(403, "Forbidden", "/problems/insufficient-scope"),
-    NotFound: Problem(404, "Not Found", "/problems/not-found"),
-    SceneNotFound: Problem(404, "Not Found", "/problems/not-found"),
+    NotAuthenticated: Problem(401, "Unauthorized", "/problems/unauthorized"),
+    InsufficientScope: Problem(403, "Forbidden", "/problems/insufficient-scope"),
+    NotFound: Problem(404, "Not Found", "/problems/not-found"),  # SceneNotFound too
     UnknownTrack: Problem(404, "Not Found", "/problems/unknown-track"),
     SeqOutOfRange: Problem(404, "Not Found", "/problems/seq-out-of-range"),
     BatchConflict: Problem(409, "Conflict", "/problems/batch-conflict"),
@@ -78,15 +81,31 @@ PROBLEMS: dict[type[Exception], Problem] = {
     RawBatchCollected: Problem(410, "Gone", "/problems/raw-batch-collected"),
     UnreadableEvent: Problem(409, "Scene needs repair", "/problems/scene-needs-repair"),
     SceneQuarantined: Problem(409, "Scene quarantined", "/problems/scene-quarantined"),
-    PayloadTooLarge: Problem(413, "Payload Too Large", "/problems/payload-too-large"),
+    BodyTooLarge: Problem(413, "Payload Too Large", "/problems/payload-too-large"),
     InvalidCommand: Problem(422, "Invalid command", "/problems/invalid-command"),
     InvalidParams: Problem(422, "Invalid parameters", "/problems/invalid-params"),
     InvalidObservation: Problem(422, "Invalid observation", "/problems/invalid-observation"),
-    RateLimited: Problem(429, "Too Many Requests", "/problems/rate-limited"),
+    RateLimitExceeded: Problem(429, "Too Many Requests", "/problems/rate-limited"),
     QueueFull: Problem(429, "Too Many Requests", "/problems/queue-full"),
     QuotaExceeded: Problem(507, "Insufficient Storage", "/problems/quota-exceeded"),
-    StoreError: INTERNAL,
+    Failure: INTERNAL,
 }
+
+
+def headers_of(error: PbdagError) -> dict[str, str] | None:
+    """The response headers HTTP asks for with `error`: a bearer challenge with a 401 or 403
+    (RFC 6750 section 3), Retry-After with a 429."""
+    match error:
+        case NotAuthenticated(token_error=None):
+            return {"WWW-Authenticate": f"Bearer {REALM}"}
+        case NotAuthenticated(token_error=token_error):
+            return {"WWW-Authenticate": f'Bearer {REALM}, error="{token_error}"'}
+        case InsufficientScope(needed=needed):
+            challenge = f'Bearer {REALM}, error="insufficient_scope", scope="{needed}"'
+            return {"WWW-Authenticate": challenge}
+        case RateLimitExceeded(retry_after=seconds) | QueueFull(retry_after=seconds):
+            return {"Retry-After": str(seconds)}
+    return None
 
 
 def problem_of(error: BaseException) -> Problem:
@@ -122,11 +141,11 @@ def problem_response(
 
 def reported(error: PbdagError) -> Response:
     """The answer to `error`: its table entry, detail, field and headers (nothing internal for
-    a 500: a store failure no client caused)."""
+    a 500: a failure no client caused)."""
     problem = problem_of(error)
     if problem is INTERNAL:
         return problem_response(INTERNAL, "the server failed to process the request")
-    return problem_response(problem, error.detail, error.field, headers=error.headers or None)
+    return problem_response(problem, error.detail, error.field, headers=headers_of(error))
 
 
 async def send_problem(send: Send, error: PbdagError) -> None:
@@ -140,6 +159,8 @@ async def _nothing_to_receive() -> Message:
 
 async def _handle_reported(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, PbdagError)
+    if problem_of(exc) is INTERNAL:  # the server failed: the log keeps what the answer hides
+        logger.error("%s on %s %s", exc.detail, request.method, request.url.path, exc_info=exc)
     return reported(exc)
 
 

@@ -31,9 +31,9 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from core.errors import PbdagError
 from core.graph import pending_verifications
 from core.planner import unresolved_fixtures
+from pbdag_errors import PbdagError
 from service.bootstrap import Container
 from service.store.queue_records import BatchRecord
 

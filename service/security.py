@@ -22,10 +22,10 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from service.access_errors import (
     AUTH_FIELD,
     AccessProblem,
-    Forbidden,
     HostNotAllowed,
-    RateLimited,
-    Unauthorized,
+    InsufficientScope,
+    NotAuthenticated,
+    RateLimitExceeded,
 )
 from service.auth import (
     Principal,
@@ -140,16 +140,16 @@ class AccessControl:
             principal = await self._principal(scope)
             self._charge(principal.rate_key, AUTH_FIELD if principal.kind == "token" else None)
             authorize(principal, scope_for_method(scope["method"]))
-        except Unauthorized as unauthorized:
+        except NotAuthenticated as unauthorized:
             answer: AccessProblem = unauthorized
             # Failed attempts are charged to the address, so a flood of guesses is throttled too.
             try:
                 self._charge(address_key(_client_host(scope)), None)
-            except RateLimited as limited:
+            except RateLimitExceeded as limited:
                 answer = limited
             await send_problem(send, answer)
             return
-        except (Forbidden, RateLimited) as problem:
+        except (InsufficientScope, RateLimitExceeded) as problem:
             await send_problem(send, problem)
             return
         scope.setdefault("state", {})["principal"] = principal
@@ -158,7 +158,7 @@ class AccessControl:
     async def _principal(self, scope: Scope) -> Principal:
         values = Headers(scope=scope).getlist("authorization")
         if len(values) > 1:
-            raise Unauthorized("send one Authorization header", error="invalid_request")
+            raise NotAuthenticated("send one Authorization header", token_error="invalid_request")
         authorization = values[0] if values else None
         client_host = _client_host(scope)
         if authorization is None:  # no database involved: stay on the event loop
@@ -181,7 +181,7 @@ class AccessControl:
             return
         wait = self.limiter.acquire(key)
         if wait > 0:
-            raise RateLimited(
+            raise RateLimitExceeded(
                 max(1, math.ceil(wait)), per_minute=self.limiter.per_minute, field=field
             )
 

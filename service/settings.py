@@ -9,6 +9,7 @@ from pydantic import Field, field_validator
 from pydantic_settings import SettingsConfigDict
 
 from codec.observations import InputLimits
+from pbdag_errors import Refused
 from service.security_settings import SecuritySettings, with_database_password
 
 DURATION_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
@@ -32,7 +33,7 @@ def parse_duration(text: str) -> float | None:
     return seconds
 
 
-class SettingsError(ValueError):
+class SettingsError(Refused, ValueError):
     """Settings that cannot work together; the command stops at start, naming the variables."""
 
 

@@ -1,11 +1,13 @@
 """The worker: claim a batch, decode it, decide, and append events + projections + done atomically.
 
-Failures are of two kinds. A passing one (the database or the blob store unavailable, another
-writer first) is retried with exponential backoff and jitter, up to `max_attempts`. A batch that
-can never succeed (it does not decode, or deciding it fails or yields a non-finite number) is
-parked as dead at once, and the scene moves on: the log records the gap (`batch_skipped`), so a
-bad batch never stalls a robot's memory and never hides. Errors stored on a batch are short;
-the details go to the server log.
+Failures are of two kinds. A passing one (the store's `StoreUnavailable`: the database or the
+blob store could not answer; or `ConcurrencyConflict`: another writer first) is retried with
+exponential backoff and jitter, up to `max_attempts`. A batch that can never succeed (it does not
+decode, or deciding it fails or yields a non-finite number) is parked as dead at once, and the
+scene moves on: the log records the gap (`batch_skipped`), so a bad batch never stalls a robot's
+memory and never hides. Errors stored on a batch are short; the details go to the server log.
+The store translates driver and file-system errors at its adapter: the worker knows only the
+project's own exceptions.
 """
 
 from __future__ import annotations
@@ -22,24 +24,23 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 import pydantic
-import sqlalchemy as sa
 
 from api_schema import BatchIn
 from codec.observations import decode_batch
 from core.decide import decide
-from core.errors import PbdagError
 from core.state import SceneState
+from pbdag_errors import PbdagError
 from service.bootstrap import Container
 from service.logs import log_context
 from service.store.blobs import BlobNotFound, RawBatchMissing
-from service.store.errors import ConcurrencyConflict, LeaseLost
+from service.store.errors import ConcurrencyConflict, LeaseLost, StoreUnavailable
 from service.store.queue_records import Claim, RawBatchCollected
 from service.store.raw_batches import decode_raw_batch
 
 logger = logging.getLogger("pbdag.worker")
 
 # Failures that may pass: the same batch can succeed on a later attempt.
-TRANSIENT = (sa.exc.OperationalError, sa.exc.InterfaceError, OSError, ConcurrencyConflict)
+TRANSIENT = (StoreUnavailable, ConcurrencyConflict)
 MAX_ERROR_CHARS = 300
 
 
@@ -51,7 +52,8 @@ def worker_name() -> str:
 def short_error(error: BaseException) -> tuple[str, bool]:
     """(the message a client may read, whether a retry may succeed)."""
     if isinstance(error, TRANSIENT):
-        return f"{type(error).__name__}: the database or the blob store failed; will retry", True
+        cause = error.cause_name if isinstance(error, StoreUnavailable) else type(error).__name__
+        return f"{cause}: the database or the blob store failed; will retry", True
     if isinstance(error, pydantic.ValidationError):
         first = error.errors()[0]
         where = ".".join(str(part) for part in first["loc"])
@@ -181,21 +183,16 @@ class Worker:
         return float(delay * self._random.uniform(0.5, 1.5))
 
     def skip(self, claim: Claim, reason: str) -> None:
-        """Dead, and the gap recorded in the scene's log, in one transaction."""
-        for _attempt in range(5):  # a command may append meanwhile: decide on the new head
-            state = self.container.log.load_state(claim.scene_id)
-            try:
-                with self.container.uow.begin() as work:
-                    work.skip(claim, state, reason)
-                self.container.metrics.batches_processed.labels("dead").inc()
-                self.container.metrics.dead_letters.inc()
-                logger.warning(
-                    "batch %s of scene %s is dead: %s", claim.batch_id, claim.scene_id, reason
-                )
-                return
-            except ConcurrencyConflict:
-                continue
-        raise ConcurrencyConflict(f"scene {claim.scene_id!r} kept changing", "scene_id")
+        """Dead, and the gap recorded in the scene's log, in one transaction (on the new head
+        when a command appended meanwhile)."""
+        self.container.uow.on_the_head(
+            claim.scene_id,
+            lambda _state: None,  # nothing to decide: the gap is recorded on whatever head
+            lambda work, state, _nothing: work.skip(claim, state, reason),
+        )
+        self.container.metrics.batches_processed.labels("dead").inc()
+        self.container.metrics.dead_letters.inc()
+        logger.warning("batch %s of scene %s is dead: %s", claim.batch_id, claim.scene_id, reason)
 
     def settle_expired(self) -> None:
         """Leases nobody renewed: back to the queue with backoff, or dead when out of attempts."""

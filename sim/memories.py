@@ -17,8 +17,7 @@ from api_schema import BatchIn, InspectionIn, RobotPose
 from codec.observations import decode_batch, decode_frames
 from codec.occupancy import occupancy_out
 from core.decide import decide
-from core.errors import PbdagError
-from core.events import SceneCreated
+from core.events import InspectionRecorded, SceneCreated
 from core.evolve import evolve, fold
 from core.graph import is_published
 from core.inspection import decide_inspection
@@ -26,8 +25,8 @@ from core.params import Params
 from core.planner import Plan, decide_plan, unresolved_fixtures
 from core.state import SceneState
 from core.values import ViewPose
-from pbdag_client import Client, RateLimited
-from pbdag_client import PbdagError as ApiError
+from pbdag_client import Client, InsufficientStorage, RateLimited, RequestRefused
+from pbdag_errors import Refused
 
 T = TypeVar("T")
 
@@ -69,7 +68,32 @@ class PlanStep:
     deferred: tuple[str, ...] = ()
 
 
-REFUSED = "refused: "  # an inspection outcome: the memory answered 4xx and recorded nothing
+@dataclass(frozen=True)
+class Recorded:
+    """The memory recorded the capture, with this outcome (completed, support_not_visible or
+    parent_rejected)."""
+
+    outcome: str
+
+    @property
+    def text(self) -> str:
+        """The outcome as reports print it."""
+        return self.outcome
+
+
+@dataclass(frozen=True)
+class Refusal:
+    """The memory refused the capture and recorded nothing (the service's 4xx): why."""
+
+    reason: str
+
+    @property
+    def text(self) -> str:
+        """The refusal as reports print it."""
+        return f"refused: {self.reason}"
+
+
+InspectionOutcome = Recorded | Refusal
 
 
 class Memory(Protocol):
@@ -79,7 +103,7 @@ class Memory(Protocol):
     def plan(self, pose: ViewPose) -> PlanStep: ...
     def inspect(
         self, capture_id: str, fixture_id: str, frames: list[dict[str, Any]], view: ViewPose
-    ) -> str: ...
+    ) -> InspectionOutcome: ...
     def graph(self) -> list[Node]: ...
     def tracks(self) -> list[TrackSummary]: ...
     def occupancy(self) -> dict[str, Any]: ...
@@ -125,17 +149,17 @@ class InProcessMemory:
 
     def inspect(
         self, capture_id: str, fixture_id: str, frames: list[dict[str, Any]], view: ViewPose
-    ) -> str:
+    ) -> InspectionOutcome:
         body = InspectionIn.model_validate({"fixture_id": fixture_id, "frames": frames})
         try:
             events = decide_inspection(
                 self.state, capture_id, fixture_id, decode_frames(body.frames), None, view=view
             )
-        except PbdagError as error:  # the service answers 4xx, and appends nothing
-            return f"{REFUSED}{error}"
+        except Refused as error:  # the service answers 4xx, and appends nothing
+            return Refusal(error.detail)
         self.state = fold(self.state, events)
-        outcome: str = events[-1].details()["outcome"]
-        return outcome
+        (recorded,) = (e for e in events if isinstance(e, InspectionRecorded))
+        return Recorded(recorded.outcome)
 
     def graph(self) -> list[Node]:
         return [
@@ -217,7 +241,7 @@ class ServiceMemory:
 
     def inspect(
         self, capture_id: str, fixture_id: str, frames: list[dict[str, Any]], view: ViewPose
-    ) -> str:
+    ) -> InspectionOutcome:
         body = InspectionIn.model_validate(
             {
                 "fixture_id": fixture_id,
@@ -227,11 +251,11 @@ class ServiceMemory:
             }
         )
         try:
-            return self.client.post_inspection(self.scene_id, body).outcome
-        except ApiError as error:
-            if 400 <= error.status < 500 and error.status != 429:
-                return f"{REFUSED}{error.detail}"  # the service appended nothing
-            raise
+            return Recorded(self.client.post_inspection(self.scene_id, body).outcome)
+        except (RateLimited, InsufficientStorage):
+            raise  # a limit of the service, not a refusal of this capture
+        except RequestRefused as error:
+            return Refusal(error.detail)  # the service appended nothing
 
     def graph(self) -> list[Node]:
         nodes = self._patiently(lambda: self.client.graph(self.scene_id)).nodes

@@ -42,7 +42,16 @@ from pbdag_client import Client
 from sim.camera import look_at
 from sim.detector_model import RealisticDetector
 from sim.free_space import FreeSpace
-from sim.memories import REFUSED, InProcessMemory, Memory, Node, ServiceMemory, TrackSummary
+from sim.memories import (
+    InProcessMemory,
+    InspectionOutcome,
+    Memory,
+    Node,
+    Recorded,
+    Refusal,
+    ServiceMemory,
+    TrackSummary,
+)
 from sim.render import add_kinect_noise, render
 from sim.scenario import load_scenario
 from sim.scenario_spec import Scenario
@@ -78,9 +87,14 @@ class Capture:
 
     fixture_id: str
     view: tuple[float, float, float, float]
-    outcome: str
+    outcome: InspectionOutcome
     keyframes_before: int
     graph_after: list[Node]
+
+    @property
+    def completed(self) -> bool:
+        """The memory recorded the capture as a completed inspection."""
+        return self.outcome == Recorded("completed")
 
 
 @dataclass
@@ -275,7 +289,7 @@ def rollout(
             capture = Capture(
                 step.fixture_id, step.view, outcome, len(result.keyframes), memory.graph()
             )
-            (result.refused if outcome.startswith(REFUSED) else result.captures).append(capture)
+            (result.refused if isinstance(outcome, Refusal) else result.captures).append(capture)
             continue
         # explore
         if robot.keyframes_left <= 0:

@@ -6,11 +6,13 @@ import math
 from collections.abc import Callable, Mapping
 from typing import Any, TypeVar
 
+from pbdag_errors import Refused
+
 T = TypeVar("T")
 _REQUIRED: Any = object()
 
 
-class ScenarioError(ValueError):
+class ScenarioError(Refused, ValueError):
     """A scenario file that cannot be used; the message starts with the offending field."""
 
 

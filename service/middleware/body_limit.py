@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from service.access_errors import PayloadTooLarge
+from service.access_errors import BodyTooLarge
 from service.errors import send_problem
 
 
@@ -38,7 +38,7 @@ class BodySizeLimit:
                 if received > self.max_bytes:
                     exceeded = True
                     # Raising stops the app from buffering the rest of the body.
-                    raise PayloadTooLarge(self.max_bytes)
+                    raise BodyTooLarge(self.max_bytes)
             return message
 
         async def guarded_send(message: Message) -> None:
@@ -70,4 +70,4 @@ class BodySizeLimit:
 
     async def _send_too_large(self, send: Send) -> None:
         """Answer 413 straight on the ASGI channel (no Request object exists here)."""
-        await send_problem(send, PayloadTooLarge(self.max_bytes))
+        await send_problem(send, BodyTooLarge(self.max_bytes))

@@ -11,7 +11,7 @@ import logging
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
-from core.errors import PbdagError
+from pbdag_errors import PbdagError
 from service.errors import send_problem
 
 logger = logging.getLogger("pbdag.api")

@@ -20,24 +20,32 @@ import re
 import tempfile
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Protocol
 
 import sqlalchemy as sa
 from sqlalchemy.dialects import postgresql
 
-from core.errors import PbdagError
-from service.store.engine import write_transaction
+from service.store.engine import may_pass, write_transaction
+from service.store.errors import StoreError, StoreUnavailable
 from service.store.tables import blobs
 
 _KEY = re.compile(r"^[0-9a-f]{64}$")
 
 
-class BlobNotFound(KeyError):
+class BlobNotFound(StoreError, KeyError):
     """No blob is stored under the key (never written, or deleted by `pbdag gc`)."""
 
+    def __init__(self, key: str) -> None:
+        super().__init__(f"no blob is stored under {key}")
+        self.key = key
 
-class RawBatchMissing(PbdagError):
+    def __str__(self) -> str:
+        return self.detail  # KeyError's own would quote it
+
+
+class RawBatchMissing(StoreError):
     """A batch's raw body is not in the blob store, though nothing collected it."""
 
     def __init__(self, batch_id: str, key: str) -> None:
@@ -48,7 +56,8 @@ class BlobStore(Protocol):
     """Put bytes, get them back by their sha256, delete them, list the keys.
 
     `get` of a missing key raises `BlobNotFound`. `delete` is idempotent: it returns whether a
-    blob was there. `pbdag gc` deletes through this protocol only.
+    blob was there. `pbdag gc` deletes through this protocol only. A failure that may pass (the
+    disk, the database) is raised as `StoreUnavailable`, whatever the backend.
     """
 
     # True when `put(content, connection)` commits with that connection's transaction (the
@@ -97,46 +106,41 @@ class FileBlobStore:
         transaction of `connection` does later."""
         key = blob_key(content)
         path = self._path(key)
-        if path.exists():
-            return key
-        path.parent.mkdir(parents=True, exist_ok=True)
-        # Write to a temp file, fsync, then rename, so a crash never leaves a torn blob.
-        fd, temp_name = tempfile.mkstemp(dir=path.parent, prefix=".incoming-")
-        try:
-            with os.fdopen(fd, "wb") as handle:
-                handle.write(content)
-                handle.flush()
-                os.fsync(handle.fileno())
-            os.replace(temp_name, path)
-        except BaseException:
-            Path(temp_name).unlink(missing_ok=True)
-            raise
-        directory = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(directory)
-        finally:
-            os.close(directory)
+        with _disk_failures("writing a blob"):
+            if path.exists():
+                return key
+            path.parent.mkdir(parents=True, exist_ok=True)
+            # Write to a temp file, fsync, then rename, so a crash never leaves a torn blob.
+            fd, temp_name = tempfile.mkstemp(dir=path.parent, prefix=".incoming-")
+            try:
+                with os.fdopen(fd, "wb") as handle:
+                    handle.write(content)
+                    handle.flush()
+                    os.fsync(handle.fileno())
+                os.replace(temp_name, path)
+            except BaseException:
+                Path(temp_name).unlink(missing_ok=True)
+                raise
+            _sync_directory(path.parent)
         return key
 
     def get(self, key: str) -> bytes:
         """The bytes stored under `key`; BlobNotFound when there are none."""
-        try:
-            return self._path(key).read_bytes()
-        except FileNotFoundError:
-            raise BlobNotFound(key) from None
+        with _disk_failures("reading a blob"):
+            try:
+                return self._path(key).read_bytes()
+            except FileNotFoundError:
+                raise BlobNotFound(key) from None
 
     def delete(self, key: str) -> bool:
         """Remove the blob (the rename of `put` makes this atomic); False when it was absent."""
         path = self._path(key)
-        try:
-            path.unlink()
-        except FileNotFoundError:
-            return False
-        directory = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(directory)
-        finally:
-            os.close(directory)
+        with _disk_failures("deleting a blob"):
+            try:
+                path.unlink()
+            except FileNotFoundError:
+                return False
+            _sync_directory(path.parent)
         return True
 
     def keys(self) -> Iterator[str]:
@@ -144,6 +148,24 @@ class FileBlobStore:
         for path in self.root.glob("??/??/*"):
             if _KEY.match(path.name) and path.is_file():
                 yield path.name
+
+
+@contextmanager
+def _disk_failures(what: str) -> Iterator[None]:
+    """The folder's OSErrors as the store's StoreUnavailable: a full or failing disk may pass."""
+    try:
+        yield
+    except OSError as error:
+        raise StoreUnavailable(what, error) from error
+
+
+def _sync_directory(directory: Path) -> None:
+    """fsync a folder, so that a rename or an unlink in it survives a crash."""
+    handle = os.open(directory, os.O_RDONLY)
+    try:
+        os.fsync(handle)
+    finally:
+        os.close(handle)
 
 
 GET_SQL = "SELECT content FROM blobs WHERE key = %s"
@@ -180,7 +202,8 @@ class PgBlobStore:
         """The bytes stored under `key`; BlobNotFound when none.
 
         Read in psycopg's binary format (a bytea in text format travels as hex: 4x slower for a
-        batch); a driver error is raised as SQLAlchemy's, which the worker knows to retry."""
+        batch), past SQLAlchemy: a driver error is translated here as the engine translates its
+        own (service.store.engine), StoreUnavailable when it may pass, else SQLAlchemy's."""
         import psycopg
 
         with self.engine.connect() as connection:
@@ -193,7 +216,10 @@ class PgBlobStore:
                 driver.rollback()  # end the read-only transaction the query opened
             except psycopg.Error as error:
                 connection.invalidate()
-                raise sa.exc.DBAPIError.instance(GET_SQL, (key,), error, psycopg.Error) from error
+                translated = sa.exc.DBAPIError.instance(GET_SQL, (key,), error, psycopg.Error)
+                if may_pass(translated):
+                    raise StoreUnavailable("reading a blob", translated) from error
+                raise translated from error
         if row is None:
             raise BlobNotFound(key)
         return bytes(row[0])

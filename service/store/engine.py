@@ -1,5 +1,10 @@
 """Engines for SQLite (WAL, BEGIN IMMEDIATE for writes) and PostgreSQL (psycopg 3), migration,
-and the contexts reads and writes run in."""
+and the contexts reads and writes run in.
+
+The engine is the store's adapter to the drivers: a driver error that may pass (a lost
+connection, a lock held too long) leaves it as the store's own `StoreUnavailable`, so nothing above
+the store knows SQLAlchemy's exception classes.
+"""
 
 from __future__ import annotations
 
@@ -13,16 +18,37 @@ import sqlalchemy as sa
 from alembic import command
 from alembic.config import Config
 
+from service.store.errors import StoreUnavailable
+
 MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
 IMMEDIATE = "pbdag_immediate"
 WAL_CHECKPOINT_PAGES = 10_000  # about 40 MB of WAL between automatic checkpoints (4 kB pages)
 
 
 def make_engine(url: str, **kwargs: Any) -> sa.Engine:
-    """An engine with the house settings for its backend."""
+    """An engine with the house settings for its backend, translating the errors that may pass."""
     if url.startswith("sqlite"):
-        return _sqlite_engine(url, **kwargs)
-    return sa.create_engine(url, pool_pre_ping=True, **kwargs)
+        engine = _sqlite_engine(url, **kwargs)
+    else:
+        engine = sa.create_engine(url, pool_pre_ping=True, **kwargs)
+    sa.event.listen(engine, "handle_error", _translated)
+    return engine
+
+
+def may_pass(error: BaseException) -> bool:
+    """Whether a driver error may pass on a later attempt: the database unavailable, a lock held
+    too long (OperationalError), the connection itself broken (InterfaceError)."""
+    return isinstance(error, sa.exc.OperationalError | sa.exc.InterfaceError)
+
+
+def _translated(context: sa.engine.ExceptionContext) -> BaseException | None:
+    """SQLAlchemy's `handle_error` hook: the exception to raise instead of a driver error that may
+    pass (None keeps SQLAlchemy's own: an integrity or programming error is no passing failure).
+    A pool's liveness probe keeps SQLAlchemy's, which the pool handles itself."""
+    error = context.sqlalchemy_exception
+    if context.is_pre_ping or error is None or not may_pass(error):
+        return None
+    return StoreUnavailable("the database", error)  # SQLAlchemy chains the driver's as its cause
 
 
 def _sqlite_engine(url: str, **kwargs: Any) -> sa.Engine:

@@ -10,8 +10,7 @@ from typing import Any
 
 import sqlalchemy as sa
 
-from core.errors import PbdagError
-from service.store.errors import StoreError
+from pbdag_errors import Refused
 from service.store.tables import batches
 
 CLAIMABLE = ("queued", "failed")  # failed: an attempt failed, the batch waits for a retry
@@ -19,19 +18,19 @@ UNFINISHED = ("queued", "failed", "running")  # these hold back later batches of
 FINISHED = ("done", "dead")  # only these may lose their raw body to retention
 
 
-class QueueFull(PbdagError):
-    """The scene holds as many unfinished batches as it may: the client retries later."""
+class QueueFull(Refused):
+    """The scene holds as many unfinished batches as it may: the client retries after
+    `retry_after` seconds."""
 
     def __init__(self, queued: int, limit: int, retry_after: int) -> None:
         super().__init__(
             f"the scene has {queued} unfinished batches, its limit "
             f"(PBDAG_MAX_QUEUED_BATCHES_PER_SCENE) is {limit}; retry in {retry_after} s",
-            None,
-            {"Retry-After": str(retry_after)},
         )
+        self.retry_after = retry_after
 
 
-class QuotaExceeded(PbdagError):
+class QuotaExceeded(Refused):
     """The scene's raw batches would exceed its byte quota."""
 
     def __init__(self, stored: int, incoming: int, limit: int) -> None:
@@ -42,11 +41,11 @@ class QuotaExceeded(PbdagError):
         )
 
 
-class NotRequeueable(StoreError):
+class NotRequeueable(Refused):
     """Only a dead batch can be requeued."""
 
 
-class RawBatchCollected(StoreError):
+class RawBatchCollected(Refused):
     """The batch's raw body was deleted by `pbdag gc` (retention); its events stay."""
 
     def __init__(self, batch_id: str, collected_at: float) -> None:

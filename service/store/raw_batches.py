@@ -25,7 +25,7 @@ from typing import Any
 import orjson
 import zstandard
 
-from core.errors import PbdagError
+from service.store.errors import StoreError
 
 __all__ = [
     "COMPACT_MARKER",
@@ -47,7 +47,7 @@ _COUNT = struct.Struct("<I")
 _SECTION = struct.Struct("<IQ")
 
 
-class RawBatchUnreadable(PbdagError):
+class RawBatchUnreadable(StoreError):
     """A stored raw batch that is neither format, or a corrupt compact blob."""
 
     def __init__(self, reason: str) -> None:

@@ -2,7 +2,8 @@
 
 In one transaction: the expected-head check, the event rows (only finite numbers), every
 projection (track table, baseline packages, snapshot) and, for a worker's batch, the lease
-fence that marks it done. The worker, every command, scene creation and the tests use it.
+fence that marks it done. The worker, every command, scene creation and the tests use it; what
+is decided on a head that another writer moves meanwhile is decided again (`on_the_head`).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TypeVar
 
 import sqlalchemy as sa
 
@@ -19,10 +21,15 @@ from core.params import Params
 from core.state import SceneState
 from core.values import BaselineSource
 from service.store.engine import write_transaction
+from service.store.errors import ConcurrencyConflict
 from service.store.event_log import EventLog, SceneRecord, snapshot_due
 from service.store.projection import last_seq_by_track, write_baseline, write_tracks
 from service.store.queue import BatchQueue
 from service.store.queue_records import Claim
+
+ATTEMPTS = 5  # heads a decision is tried on before the caller is told to try again later
+Decided = TypeVar("Decided")
+Written = TypeVar("Written")
 
 
 @dataclass(frozen=True)
@@ -58,6 +65,29 @@ class UnitOfWork:
             yield writes
         if self.on_committed is not None and writes.events_appended:
             self.on_committed(writes.events_appended)
+
+    def on_the_head(
+        self,
+        scene_id: str,
+        decide: Callable[[SceneState], Decided],
+        write: Callable[[Writes, SceneState, Decided], Written],
+    ) -> Written:
+        """Decide on the scene's head, then write in one transaction; decided again on the new
+        head when another writer appended first (optimistic concurrency).
+
+        `decide` runs outside the transaction (no write lock is held while the method works),
+        and an error it raises propagates with nothing written. ConcurrencyConflict when the
+        head moved on every one of ATTEMPTS tries.
+        """
+        for _attempt in range(ATTEMPTS):
+            state = self.log.load_state(scene_id)
+            decided = decide(state)
+            try:
+                with self.begin() as work:
+                    return write(work, state, decided)
+            except ConcurrencyConflict:
+                continue
+        raise ConcurrencyConflict(f"scene {scene_id!r} kept changing; try again", "scene_id")
 
 
 class Writes:

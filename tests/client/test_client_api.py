@@ -15,7 +15,7 @@ from pbdag_client import (
     Conflict,
     Forbidden,
     InvalidRequest,
-    NotFound,
+    ResourceNotFound,
 )
 from tests.client.conftest import FilledScene, Service
 
@@ -163,10 +163,10 @@ def test_verdicts_baselines_inspections_and_the_plan(
 
 def test_errors_of_the_real_service_are_typed(service: Service, filled: FilledScene) -> None:
     with Client(service.url) as client:
-        with pytest.raises(NotFound) as missing:
+        with pytest.raises(ResourceNotFound) as missing:
             client.scene("no-such-scene")
         assert missing.value.status == 404 and missing.value.field == "scene_id"
-        with pytest.raises(NotFound):
+        with pytest.raises(ResourceNotFound):
             client.explain(filled.scene_id, "trk-999999")
         with pytest.raises(InvalidRequest) as bad_query:
             client.graph(filled.scene_id, as_of=-5)
@@ -190,7 +190,7 @@ def test_a_bad_observation_names_its_field(service: Service, demo_batches: list[
         scene = client.create_scene("client-bad")
         with pytest.raises(InvalidRequest) as raised:
             client.post_batch(scene.id, batch)
-        with pytest.raises(NotFound):  # nothing was stored
+        with pytest.raises(ResourceNotFound):  # nothing was stored
             client.batch(scene.id, "bad-pose")
     assert raised.value.field == "frames[0].pose"
     assert raised.value.fields == ["frames[0].pose"]
@@ -251,7 +251,7 @@ def test_the_async_client_reads_what_the_sync_one_does(
             capture = InspectionIn(fixture_id=fixture.id, frames=demo_batches[-1].frames[:1])
             inspection = await client.post_inspection(filled.scene_id, capture)
             assert inspection.fixture_id == fixture.id
-            with pytest.raises(NotFound):
+            with pytest.raises(ResourceNotFound):
                 await client.scene("no-such-scene")
             with pytest.raises(InvalidRequest) as raised:
                 await client.graph(scene.id, as_of=-5)

@@ -15,6 +15,7 @@ import pytest
 
 from pbdag_client import (
     AccessDenied,
+    ApiError,
     BatchDead,
     BatchTimeout,
     Client,
@@ -22,9 +23,11 @@ from pbdag_client import (
     InvalidRequest,
     PbdagError,
     RateLimited,
+    RequestRefused,
     ServerError,
     Unauthorized,
 )
+from pbdag_errors import Failure, Refused
 from service.auth import create_token
 from tests.client.conftest import open_settings, serving
 
@@ -69,10 +72,24 @@ def test_quota_and_unknown_statuses_keep_their_problem() -> None:
     teapot = problem(418, "/problems/teapot", "I'm a teapot")
     with (
         answering(lambda _: httpx.Response(418, json=teapot)) as client,
-        pytest.raises(PbdagError) as other,
+        pytest.raises(RequestRefused) as other,
     ):
         client.scenes()
-    assert type(other.value) is PbdagError and other.value.title == "I'm a teapot"
+    assert type(other.value) is RequestRefused and other.value.title == "I'm a teapot"
+
+
+def test_answers_mirror_the_one_hierarchy() -> None:
+    """A 4xx is a `Refused` and a 5xx a `Failure`, as the service's own errors are; every
+    answer is a `PbdagError` (the very class, not one of the same name)."""
+    assert issubclass(InvalidRequest, Refused) and issubclass(InsufficientStorage, Refused)
+    assert issubclass(ServerError, Failure) and not issubclass(ServerError, Refused)
+    assert issubclass(ApiError, PbdagError) and PbdagError.__module__ == "pbdag_errors"
+    with (
+        answering(lambda _: httpx.Response(404, json=problem(404, "/x", "Not Found"))) as c,
+        pytest.raises(Refused) as missing,
+    ):
+        c.scenes()
+    assert isinstance(missing.value, ApiError) and missing.value.status == 404
 
 
 def test_a_proxy_page_is_a_server_error_with_its_text() -> None:
@@ -181,7 +198,16 @@ def imported_roots(path: Path) -> set[str]:
 
 
 def test_the_client_needs_only_the_wire_models_httpx_numpy_and_pillow() -> None:
-    allowed = {"api_schema", "pbdag_client", "httpx", "numpy", "PIL", "pydantic", "__future__"}
+    allowed = {
+        "api_schema",
+        "pbdag_client",
+        "pbdag_errors",
+        "httpx",
+        "numpy",
+        "PIL",
+        "pydantic",
+        "__future__",
+    }
     modules = sorted((ROOT / "pbdag_client").glob("*.py"))
     assert len(modules) >= 3
     outside = {

@@ -20,7 +20,15 @@ from evaluation.predictions import PredictedNode
 from service.app import create_app
 from service.bootstrap import Container
 from service.cli import main
-from sim.memories import REFUSED, InProcessMemory, Node, ServiceMemory, TrackSummary
+from sim.memories import (
+    InProcessMemory,
+    InspectionOutcome,
+    Node,
+    Recorded,
+    Refusal,
+    ServiceMemory,
+    TrackSummary,
+)
 from sim.rollout import RolloutResult, RolloutSettings, rollout
 from sim.scenario import scenario_from_dict
 from sim.truth import TruthFixture
@@ -79,7 +87,7 @@ def test_a_rollout_from_an_empty_map_finds_inspects_and_exhausts_the_frontiers()
     assert not unresolved_fixtures(state) or set(final["deferred"]) >= {
         t.track_id for t in unresolved_fixtures(state)
     }
-    inspected = {c.fixture_id for c in result.captures if c.outcome == "completed"}
+    inspected = {c.fixture_id for c in result.captures if c.completed}
     assert len(inspected) == 2  # the table and the counter, not the sofa
     # No reachable frontier is left on the map the robot built.
     robot = ViewPose(x=result.path[-1][0], y=result.path[-1][1], yaw=0.0)
@@ -102,10 +110,10 @@ class RefusesOnce(InProcessMemory):
 
     def inspect(
         self, capture_id: str, fixture_id: str, frames: list[dict[str, Any]], view: ViewPose
-    ) -> str:
+    ) -> InspectionOutcome:
         if self.refusals == 0:
             self.refusals += 1
-            return f"{REFUSED}fixture {fixture_id!r} is retired, not confirmed"
+            return Refusal(f"fixture {fixture_id!r} is retired, not confirmed")
         return super().inspect(capture_id, fixture_id, frames, view)
 
 
@@ -114,8 +122,10 @@ def test_a_refused_capture_is_no_inspection_and_the_robot_plans_again() -> None:
     memory = RefusesOnce("small")
     settings = RolloutSettings(inspection_budget=1)
     result = rollout(scenario_from_dict(copy.deepcopy(SMALL)), 7, memory, settings)
-    assert [c.outcome.startswith(REFUSED) for c in result.refused] == [True]
-    assert [c.outcome for c in result.captures] == ["completed"]
+    assert [c.outcome.text for c in result.refused] == [
+        f"refused: fixture {result.refused[0].fixture_id!r} is retired, not confirmed"
+    ]
+    assert [c.outcome for c in result.captures] == [Recorded("completed")]
     assert result.stop_reason == "inspection budget (1) spent"
     recorded = [t for t in memory.state.tracks.values() if t.inspection_status == "completed"]
     assert [t.track_id for t in recorded] == [result.captures[0].fixture_id]

@@ -21,6 +21,7 @@ from service.store.blobs import (
     PgBlobStore,
 )
 from service.store.engine import make_engine, migrate, write_transaction
+from service.store.errors import StoreUnavailable
 from service.store.queue_records import Admission
 from service.store.tables import batches
 from service.store.tables import blobs as blobs_table
@@ -252,11 +253,11 @@ def migrate_there_and_back(
 
 
 @pytest.mark.skipif("postgres" not in store_backends(), reason="needs PostgreSQL")
-def test_a_driver_error_reading_a_postgres_blob_is_sqlalchemys(
+def test_a_driver_error_reading_a_postgres_blob_is_translated_as_the_engine_does(
     request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The binary read goes to psycopg directly; its errors reach the worker as SQLAlchemy's
-    (an OperationalError, the database unavailable, is retried there)."""
+    """The binary read goes to psycopg directly; a lost connection becomes the store's
+    StoreUnavailable (the worker retries it), any other driver error stays SQLAlchemy's."""
     import service.store.blobs
 
     engine = engine_on_fresh_schema(request)
@@ -268,46 +269,60 @@ def test_a_driver_error_reading_a_postgres_blob_is_sqlalchemys(
         monkeypatch.setattr(service.store.blobs, "GET_SQL", "SELECT content FROM gone WHERE %s")
         with pytest.raises(sa.exc.ProgrammingError, match="gone"):
             blobs.get(key)
+        monkeypatch.setattr(
+            service.store.blobs,
+            "GET_SQL",
+            "SELECT content FROM blobs WHERE key = %s AND pg_terminate_backend(pg_backend_pid())",
+        )
+        with pytest.raises(StoreUnavailable) as lost:
+            blobs.get(key)
+        assert lost.value.cause_name == "OperationalError"
         monkeypatch.undo()
         assert blobs.get(key) == b"x" * 5000  # the pool replaced the invalidated connection
     finally:
         engine.dispose()
 
 
-def test_the_folder_is_written_before_sqlites_write_lock_is_taken(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+def test_a_failing_folder_is_unavailable_and_a_missing_blob_not_found(tmp_path: Path) -> None:
+    """The folder's OSErrors leave the adapter as the store's own errors."""
+    blobs = FileBlobStore(tmp_path / "blobs")
+    key = blobs.put(b"kept")
+    blocked = hashlib.sha256(b"blocked").hexdigest()
+    (tmp_path / "blobs" / blocked[:2]).write_bytes(b"a file where a shard folder belongs")
+    with pytest.raises(StoreUnavailable) as writing:
+        blobs.put(b"blocked")
+    assert writing.value.cause_name in ("FileExistsError", "NotADirectoryError")
+    (tmp_path / "blobs" / key[:2] / key[2:4] / key).unlink()
+    (tmp_path / "blobs" / key[:2] / key[2:4] / key).mkdir()  # a folder where the blob belongs
+    with pytest.raises(StoreUnavailable) as reading:
+        blobs.get(key)
+    assert reading.value.cause_name == "IsADirectoryError"
+    never = hashlib.sha256(b"never written").hexdigest()
+    with pytest.raises(BlobNotFound, match=f"no blob is stored under {never}"):
+        blobs.get(never)
+
+
+def test_a_database_error_that_may_pass_leaves_the_engine_as_the_stores_own(
+    tmp_path: Path,
 ) -> None:
-    """The fsync of a folder's blob never holds the SQLite write lock (the worker's appends
-    would wait for it): another writer can begin while the blob is being written."""
-    monkeypatch.delenv("PBDAG_DATABASE_URL", raising=False)
-    monkeypatch.delenv("PBDAG_BLOB_BACKEND", raising=False)
-    container = build_container(Settings(data_dir=tmp_path, allow_anonymous_local=True))
-    with local_client(create_app(container)) as client:
-        scene_id = client.post("/v1/scenes", json={"name": "lock"}).json()["id"]
-    real_put = container.blobs.put
-    seen: list[bool] = []
-
-    def another_writer_can_begin() -> None:
-        other = sa.create_engine(f"sqlite:///{tmp_path / 'pbdag.db'}", poolclass=sa.NullPool)
-        try:
-            with other.connect() as probe:
-                probe.exec_driver_sql("PRAGMA busy_timeout=0")
-                probe.connection.driver_connection.isolation_level = None  # type: ignore[union-attr]
-                probe.exec_driver_sql("BEGIN IMMEDIATE")  # fails while a writer holds the lock
-                probe.exec_driver_sql("ROLLBACK")
-        finally:
-            other.dispose()
-
-    def put_while_probing(content: bytes, connection: sa.Connection | None = None) -> str:
-        another_writer_can_begin()
-        seen.append(connection is None)
-        return real_put(content, connection)
-
-    locked = pytest.raises(sa.exc.OperationalError, match="locked")  # the probe sees a writer
-    with locked, write_transaction(container.engine):
-        another_writer_can_begin()
-    monkeypatch.setattr(container.blobs, "put", put_while_probing)
-    record, created = container.queue.submit(scene_id, "b0", "a" * 64, b"raw", 1, BOUNDS)
-    assert created and seen == [True]
-    assert container.blobs.get(record.blob_key) == b"raw"
-    container.engine.dispose()
+    """SQLite's write lock held by another writer: StoreUnavailable, the driver's error kept as
+    its cause; an error that cannot pass (an integrity error) stays SQLAlchemy's."""
+    url = f"sqlite:///{tmp_path / 'x.db'}"
+    engine = make_engine(url)
+    sa.event.listen(engine, "connect", lambda driver, _: driver.execute("PRAGMA busy_timeout=0"))
+    other = sa.create_engine(url, poolclass=sa.NullPool)
+    try:
+        with other.connect() as holder:
+            holder.connection.driver_connection.isolation_level = None  # type: ignore[union-attr]
+            holder.exec_driver_sql("BEGIN IMMEDIATE")
+            with pytest.raises(StoreUnavailable) as locked, write_transaction(engine):
+                pass
+            holder.exec_driver_sql("ROLLBACK")
+        assert locked.value.cause_name == "OperationalError"
+        assert "locked" in str(locked.value.__cause__)
+        with pytest.raises(sa.exc.IntegrityError), write_transaction(engine) as connection:
+            connection.exec_driver_sql("CREATE TABLE t (id INTEGER PRIMARY KEY)")
+            connection.exec_driver_sql("INSERT INTO t VALUES (1), (1)")
+    finally:
+        engine.dispose()
+        other.dispose()

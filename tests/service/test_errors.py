@@ -14,7 +14,8 @@ from starlette.types import Message
 
 from api_schema import BatchIn
 from codec.observations import decode_batch
-from core.errors import NotFound, PbdagError, StateConflict, UnknownTrack, field_path
+from core.errors import NotFound, StateConflict, UnknownTrack, field_path
+from pbdag_errors import PbdagError
 from service.errors import (
     INTERNAL,
     PROBLEM_MEDIA_TYPE,

@@ -108,26 +108,59 @@ def test_a_dead_batch_error_is_short_and_names_nothing_internal(
 def test_a_passing_failure_backs_off_then_succeeds(
     client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
 ) -> None:
+    """The database fails once while the worker reads the scene (the driver's own
+    OperationalError, raised where the driver raises it): the store's adapter translates it,
+    and the worker retries."""
     scene_id = new_scene(client)
     post(client, scene_id, "b0")
-    real_get, failures = container.blobs.get, [OSError("blob store unreachable")]
+    dbapi = container.engine.dialect.dbapi
+    assert dbapi is not None
+    failures: list[Exception] = []
+    real_scene, reads = container.log.scene, 0
 
-    def flaky_get(key: str) -> bytes:
+    def scene_failing_once(scene_id: str, connection: Any = None) -> Any:
+        nonlocal reads
+        reads += 1
+        if reads == 1:
+            failures.append(dbapi.OperationalError("the database is unavailable"))
+        return real_scene(scene_id, connection)
+
+    @sa.event.listens_for(container.engine, "before_cursor_execute")
+    def fail_when_armed(*_: Any) -> None:
         if failures:
             raise failures.pop()
-        return real_get(key)
 
-    monkeypatch.setattr(container.blobs, "get", flaky_get)
+    monkeypatch.setattr(container.log, "scene", scene_failing_once)
+
     worker = Worker(container, seed=1)
     assert worker.drain() == 1
     failed = status(client, scene_id, "b0")
-    assert failed["status"] == "failed" and "will retry" in failed["error"]
+    assert failed["status"] == "failed"
+    assert failed["error"] == "OperationalError: the database or the blob store failed; will retry"
     assert worker.drain() == 0  # not due yet: its retry waits for the backoff
     now = time.time() + 120
     monkeypatch.setattr(container.queue, "clock", lambda: now)
     assert worker.drain() == 1
     done = status(client, scene_id, "b0")
     assert (done["status"], done["attempts"], done["error"]) == ("done", 2, None)
+
+
+def test_an_untranslated_error_is_no_passing_failure(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The worker classifies the project's own errors only: an OSError that no adapter
+    translated is a bug, and the batch is dead at once rather than retried."""
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0")
+
+    def unreadable(key: str) -> bytes:
+        raise OSError("not through the adapter")
+
+    monkeypatch.setattr(container.blobs, "get", unreadable)
+    Worker(container).drain()
+    dead = status(client, scene_id, "b0")
+    assert (dead["status"], dead["attempts"]) == ("dead", 1)
+    assert dead["error"] == "internal error (OSError) while deciding; see the server log"
 
 
 def test_retry_delays_grow_exponentially_with_jitter_up_to_the_cap(container: Container) -> None:
