@@ -3,13 +3,14 @@ the imports."""
 
 from __future__ import annotations
 
-import ast
+import sys
 from pathlib import Path
 
 import networkx as nx
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from tests.import_graph import ROOT, import_graph, imported_modules, imported_roots, module_name
+
 # What only the server runs on, and the packages above the service.
 SERVER = {"service", "sqlalchemy", "fastapi", "starlette", "uvicorn", "alembic", "psycopg"}
 ABOVE = {"sim", "evaluation", "bench", "tests"}
@@ -44,21 +45,11 @@ PACKAGES = (
     "ingest",
     "migrations",
     "pbdag_client",
+    "pbdag_errors",
     "service",
     "sim",
     "tests",
 )
-
-
-def imported_roots(path: Path) -> set[str]:
-    """Top-level package names a module imports."""
-    roots = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            roots |= {alias.name.split(".")[0] for alias in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            roots.add(node.module.split(".")[0])
-    return roots
 
 
 @pytest.mark.parametrize("package", sorted(FORBIDDEN))
@@ -77,51 +68,6 @@ def test_the_checker_sees_a_violation(tmp_path: Path) -> None:
     module = tmp_path / "bad.py"
     module.write_text("import sqlalchemy\nfrom service.app import create_app\n")
     assert imported_roots(module) >= {"sqlalchemy", "service"}
-
-
-def module_name(path: Path, root: Path) -> str:
-    """Dotted module name of a file under `root` (a package's __init__ is the package)."""
-    parts = list(path.relative_to(root).with_suffix("").parts)
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-
-
-def imported_modules(path: Path, name: str) -> set[str]:
-    """Dotted names a module imports, relative imports resolved, each `from X import y` also as X.y.
-
-    Every import counts, including those under TYPE_CHECKING and inside functions: a cycle hidden
-    there is still a cycle in the design.
-    """
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            found |= {alias.name for alias in node.names}
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join([*anchor, base] if base else anchor)
-            found.add(base)
-            found |= {f"{base}.{alias.name}" for alias in node.names}
-    return found
-
-
-def import_graph(root: Path, packages: tuple[str, ...]) -> nx.DiGraph:
-    """Module -> imported module edges among the modules of `packages` under `root`."""
-    files = {
-        module_name(path, root): path
-        for package in packages
-        for path in (root / package).rglob("*.py")
-    }
-    graph = nx.DiGraph()
-    graph.add_nodes_from(files)
-    for name, path in files.items():
-        graph.add_edges_from(
-            (name, target)
-            for target in imported_modules(path, name)
-            if target in files and target != name
-        )
-    return graph
 
 
 def import_cycles(graph: nx.DiGraph) -> list[list[str]]:
@@ -168,3 +114,64 @@ def test_the_cycle_checker_sees_a_cycle_hidden_in_a_function(tmp_path: Path) -> 
     (package / "b.py").write_text("import pkg.c\n")
     (package / "c.py").write_text("def late() -> None:\n    from pkg.a import thing\n")
     assert import_cycles(import_graph(tmp_path, ("pkg",))) == [["pkg.a", "pkg.b", "pkg.c"]]
+
+
+def test_the_error_root_imports_only_the_standard_library() -> None:
+    """`pbdag_errors` sits below every package, `core` and `pbdag_client` included."""
+    modules = sorted((ROOT / "pbdag_errors").rglob("*.py"))
+    assert modules
+    allowed = set(sys.stdlib_module_names) | {"__future__"}
+    outside = {
+        str(module.relative_to(ROOT)): imported_roots(module) - allowed for module in modules
+    }
+    assert {name: extra for name, extra in outside.items() if extra} == {}
+
+
+def modules_of_tests(root: Path) -> list[Path]:
+    """Every test module (test_*.py) under `root`'s tests/."""
+    return sorted((root / "tests").rglob("test_*.py"))
+
+
+def enclosing_test_module(dotted: str) -> str | None:
+    """The test module a dotted name is in or is (`tests.a.test_b.helper` -> `tests.a.test_b`)."""
+    parts = dotted.split(".")
+    for index, part in enumerate(parts):
+        if part.startswith("test_"):
+            return ".".join(parts[: index + 1]) if parts[0] == "tests" else None
+    return None
+
+
+def imports_of_test_modules(root: Path) -> dict[str, list[str]]:
+    """For each test module that imports another test module, the ones it imports: a shared
+    helper belongs in a module that is not a test (collecting one test module must not depend
+    on collecting another, nor on the optional packages it needs)."""
+    found = {}
+    for path in modules_of_tests(root):
+        name = module_name(path, root)
+        imported = sorted(
+            {
+                tested
+                for target in imported_modules(path, name)
+                if (tested := enclosing_test_module(target)) is not None
+            }
+        )
+        if imported:
+            found[name] = imported
+    return found
+
+
+def test_no_test_module_imports_another() -> None:
+    assert modules_of_tests(ROOT), "the checker found no test modules"
+    assert imports_of_test_modules(ROOT) == {}
+
+
+def test_the_test_import_checker_sees_one(tmp_path: Path) -> None:
+    tests = tmp_path / "tests"
+    (tests / "core").mkdir(parents=True)
+    (tests / "core" / "test_a.py").write_text("from tests.core.test_b import helper\n")
+    (tests / "core" / "test_b.py").write_text("from tests.core import test_c\n")
+    (tests / "core" / "helpers.py").write_text("from tests.core.test_a import x\n")
+    assert imports_of_test_modules(tmp_path) == {
+        "tests.core.test_a": ["tests.core.test_b"],
+        "tests.core.test_b": ["tests.core.test_c"],
+    }

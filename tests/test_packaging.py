@@ -12,7 +12,7 @@ import pytest
 from evaluation import cli as evaluation_cli
 from ingest import cli as ingest_cli
 from service.cli import main
-from tests.test_layers import ROOT, imported_roots
+from tests.import_graph import ROOT, imported_roots
 
 SERVICE_PACKAGES = ("core", "codec", "service", "api_schema", "migrations")
 # Distributions whose import name differs from their own.

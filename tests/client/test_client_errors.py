@@ -3,7 +3,6 @@ client package may import."""
 
 from __future__ import annotations
 
-import ast
 import json
 import sys
 from collections.abc import Callable
@@ -30,8 +29,7 @@ from pbdag_client import (
 from pbdag_errors import Failure, Refused
 from service.auth import create_token
 from tests.client.conftest import open_settings, serving
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests.import_graph import ROOT, imported_roots
 
 
 def problem(status: int, type: str, title: str, field: str | None = None) -> dict[str, Any]:
@@ -185,16 +183,6 @@ def test_a_token_protected_service_refuses_without_a_valid_token(tmp_path: Path)
             with pytest.raises(InvalidRequest) as invalid:
                 client.events_page(scene.id, limit=0)
             assert invalid.value.field == "limit"
-
-
-def imported_roots(path: Path) -> set[str]:
-    roots = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            roots |= {alias.name.split(".")[0] for alias in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
-            roots.add(node.module.split(".")[0])
-    return roots
 
 
 def test_the_client_needs_only_the_wire_models_httpx_numpy_and_pillow() -> None:

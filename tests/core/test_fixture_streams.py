@@ -21,7 +21,7 @@ from core.state import SceneState  # noqa: E402
 from sim.scenario import REPO_ROOT, load_scenario  # noqa: E402
 from sim.stream import iter_frames, iter_wire_batches  # noqa: E402
 from tests.conftest import SHARED_DATA  # noqa: E402
-from tests.core.test_fixture_map import same_clusters, same_proposals  # noqa: E402
+from tests.core.cluster_checks import same_clusters, same_proposals  # noqa: E402
 
 SCENARIOS = REPO_ROOT / "sim" / "scenarios"
 STREAMS = sorted(SCENARIOS.glob("*.yaml")) + sorted((SCENARIOS / "active").glob("*.yaml"))

@@ -4,27 +4,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Iterator, Sequence
-from typing import Any
 
 import pytest
-from fastapi.testclient import TestClient
 
-from service.app import create_app
-from service.bootstrap import Container
 from service.store.projection import rebuild_scene
-from service.worker import Worker
-from tests.clients import local_client
 from tests.core.rendered import COUNTER_VIEWS, TABLE_VIEWS
 from tests.eval_extra import require_eval_extra
 
 require_eval_extra()  # the simulator renders this test's world
 
+from tests.e2e.fixture_api import Api, api, discovered, feed, fixture_ids, nodes  # noqa: E402
 from tests.e2e.fixture_world import (  # noqa: E402
     AWAY_VIEW,
     CLOSE_VIEW,
     COUNTER,
-    DISCOVERY,
     FINE,
     ROOM,
     TABLE,
@@ -32,42 +25,7 @@ from tests.e2e.fixture_world import (  # noqa: E402
     wire_frame,
 )
 
-Api = tuple[TestClient, Worker, Container]  # a client on the app, the worker it drives, the store
-
-
-@pytest.fixture
-def api(container: Container) -> Iterator[Api]:
-    with local_client(create_app(container)) as client:
-        yield client, Worker(container), container
-
-
-def feed(
-    client: TestClient, worker: Worker, scene_id: str, bodies: Sequence[dict[str, Any]]
-) -> None:
-    for body in bodies:
-        assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code == 202
-    worker.drain()
-    for body in bodies:
-        assert (
-            client.get(f"/v1/scenes/{scene_id}/batches/{body['batch_id']}").json()["status"]
-            == "done"
-        )
-
-
-def nodes(client: TestClient, scene_id: str, **params: str) -> list[dict[str, Any]]:
-    graph = client.get(f"/v1/scenes/{scene_id}/graph", params=params).json()
-    found: list[dict[str, Any]] = graph["nodes"]
-    return found
-
-
-def discovered(client: TestClient, worker: Worker, **kwargs: Any) -> str:
-    scene_id: str = client.post("/v1/scenes", json={"name": "house"}).json()["id"]
-    feed(client, worker, scene_id, wire_batches(ROOM, DISCOVERY, "d", **kwargs))
-    return scene_id
-
-
-def fixture_ids(client: TestClient, scene_id: str) -> dict[str, str]:
-    return {n["label"]: n["id"] for n in nodes(client, scene_id) if n["kind"] == "fixture"}
+__all__ = ["api"]  # the fixture, used by name
 
 
 def test_each_fixture_confirmed_once_with_label_center_and_the_mug_on_the_table(api: Api) -> None:

@@ -8,7 +8,11 @@ import orjson
 from service.bootstrap import Container
 from service.retention import collect
 from service.store.raw_batches import decode_raw_batch
-from tests.e2e.test_fixtures_over_http import Api, api, discovered
+from tests.eval_extra import require_eval_extra
+
+require_eval_extra()  # the simulator renders this test's world
+
+from tests.e2e.fixture_api import Api, api, discovered  # noqa: E402
 
 __all__ = ["api"]  # the fixture, used by name
 

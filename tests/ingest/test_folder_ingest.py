@@ -19,31 +19,9 @@ from ingest.folder import FolderSource
 from ingest.frames import FrameSource, SkipFrame, SourceFrame
 from ingest.pipeline import ingest
 from service.cli import main
+from tests.ingest.cli_runs import ingest_folder
 from tests.ingest.conftest import FRAMES, REPO, Recordings, running_service
 from tests.ingest.service_checks import batch_status, events, nodes, scene_id
-
-
-def ingest_folder(
-    recordings: Recordings, url: str, scene: str, *extra: str, folder: Path | None = None
-) -> int:
-    return main(
-        [
-            "ingest",
-            "folder",
-            str(folder or recordings.folder),
-            "--scene",
-            scene,
-            "--url",
-            url,
-            "--detector",
-            "instance-pngs",
-            "--masks",
-            str(recordings.folder / "masks"),
-            "--labels",
-            str(recordings.labels),
-            *extra,
-        ]
-    )
 
 
 def test_a_folder_becomes_objects_and_a_fixture_in_the_scene(

@@ -13,10 +13,10 @@ from ingest.frames import IngestError
 from ingest.rosbag import OdomPose, RosbagSource, TfPose
 from ingest.transforms import invert
 from service.cli import main
+from tests.ingest.cli_runs import ingest_folder
 from tests.ingest.conftest import FRAMES, Recordings
 from tests.ingest.recordings import BASE_TO_CAMERA, MAP_TO_ODOM, frame_stamp
 from tests.ingest.service_checks import batch_status, events, nodes, scene_id
-from tests.ingest.test_folder_ingest import ingest_folder
 
 # The kitchen's pose files drift from orthonormal by about 1e-4; a bag's quaternions are
 # orthonormal, so the poses read back agree to that drift (a wrong chain is off by decimetres).

@@ -26,7 +26,7 @@ from service.errors import (
 from service.middleware.body_limit import BodySizeLimit
 from service.middleware.unexpected import UnexpectedErrors
 from service.store.errors import BatchConflict
-from tests.service.test_codec import batch_body, frame_body
+from tests.wire_bodies import batch_body, frame_body
 
 MAX_BODY_BYTES = 200_000
 PROBLEM_KEYS = {"type", "title", "status", "detail", "field", "errors"}

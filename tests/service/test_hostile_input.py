@@ -20,7 +20,7 @@ from PIL import Image
 from service.app import create_app
 from service.bootstrap import Container
 from tests.clients import local_client
-from tests.service.test_codec import batch_body, frame_body, rle_of
+from tests.wire_bodies import batch_body, frame_body, rle_of
 
 
 @pytest.fixture

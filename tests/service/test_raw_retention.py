@@ -30,7 +30,7 @@ from service.store.queue_records import BatchRecord, RawBatchCollected
 from service.store.raw_batches import decode_raw_batch, raw_batch_format
 from service.worker import Worker
 from tests.clients import local_client
-from tests.service.test_worker_failures import poison_the_log
+from tests.service.minimal_events import poison_the_log
 from tests.wire_scenes import batch
 
 

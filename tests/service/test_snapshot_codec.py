@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 from core.evolve import fold
 from core.state import SceneState
 from service.store.snapshot_codec import SNAPSHOT_HEADER, decode_snapshot, encode_snapshot
-from tests.core.test_replay_properties import live_run, step
+from tests.core.replay_runs import live_run, step
 
 
 @settings(max_examples=30, deadline=None)

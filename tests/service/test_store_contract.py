@@ -9,10 +9,9 @@ from pathlib import Path
 import pytest
 import sqlalchemy as sa
 
-from core.events import Event, ObjectAdded, VisibleMiss
+from core.events import Event, VisibleMiss
 from core.params import Params
 from core.state import SceneState
-from core.values import Observation
 from service.bootstrap import Container
 from service.commands import create_scene, run_command
 from service.settings import Settings
@@ -36,33 +35,7 @@ from service.store.queue_records import (
 )
 from service.store.snapshot_codec import SNAPSHOT_VERSION
 from service.store.tables import snapshots, tracks
-
-
-def added(track_id: str, x: float = 0.0) -> ObjectAdded:
-    """A minimal add event."""
-    return ObjectAdded(
-        track_id=track_id,
-        state="tentative",
-        frame_id="f",
-        observations=(
-            Observation(
-                frame_id="f",
-                label="mug",
-                score=0.9,
-                center=(x, 0.0, 1.0),
-                extent=(0.1, 0.1, 0.1),
-                valid_pixels=100,
-                parent=None,
-            ),
-        ),
-        embedding_sum=None,
-        embedding_count=0,
-        timestamp=1.0,
-        existence_logodds=1.0,
-        p_exist=0.73,
-        batches_observed=1,
-        parent_evidence={},
-    )
+from tests.service.minimal_events import added
 
 
 def missed(track_id: str, logodds: float, misses: int) -> VisibleMiss:

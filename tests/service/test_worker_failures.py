@@ -5,28 +5,23 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import replace
 from typing import Any
 
-import orjson
 import pytest
 import sqlalchemy as sa
 from fastapi.testclient import TestClient
 
-from core.events import Event, ObjectAdded
+from core.events import Event
 from core.observation import Batch
 from core.state import SceneState
 from service.app import create_app
 from service.bootstrap import Container
 from service.repair import repair_scene
-from service.store.engine import write_transaction
 from service.store.projection import rebuild_scene
-from service.store.tables import events as events_table
-from service.store.tables import scenes as scenes_table
 from service.worker import Worker
 from tests.clients import local_client
-from tests.service.test_codec import batch_body, frame_body
-from tests.service.test_store_contract import added
+from tests.service.minimal_events import an_add, poison_the_log
+from tests.wire_bodies import batch_body, frame_body
 
 
 @pytest.fixture
@@ -49,14 +44,6 @@ def new_scene(client: TestClient) -> str:
 def status(client: TestClient, scene_id: str, batch_id: str) -> dict[str, Any]:
     result: dict[str, Any] = client.get(f"/v1/scenes/{scene_id}/batches/{batch_id}").json()
     return result
-
-
-def an_add(extent_x: float) -> ObjectAdded:
-    """A minimal add whose box is `extent_x` wide."""
-    return replace(
-        added("trk-000001"),
-        observations=(replace(added("trk-000001").observations[0], extent=(extent_x, 0.1, 0.1)),),
-    )
 
 
 def test_a_non_finite_event_is_never_stored_and_the_scene_moves_on(
@@ -198,33 +185,6 @@ def test_the_lease_is_renewed_while_a_slow_batch_runs(
     first.join()
     done = status(client, scene_id, "slow")
     assert stolen == 0 and (done["status"], done["attempts"]) == ("done", 1)
-
-
-def poison_the_log(container: Container, scene_id: str) -> int:
-    """Append an event as an older version stored it: NaN written as null."""
-    record = orjson.loads(orjson.dumps(an_add(0.1).details()))
-    record["observations"][0]["extent"] = [None, None, None]
-    with write_transaction(container.engine) as connection:
-        head = connection.execute(
-            sa.select(scenes_table.c.head_seq).where(scenes_table.c.id == scene_id)
-        ).scalar_one()
-        connection.execute(
-            events_table.insert().values(
-                scene_id=scene_id,
-                seq=head + 1,
-                type="add",
-                track_id="trk-000099",
-                state="tentative",
-                batch_id="old-poison",
-                frame_id="f0",
-                recorded_at=0.0,
-                details=orjson.dumps(record).decode(),
-            )
-        )
-        connection.execute(
-            sa.update(scenes_table).where(scenes_table.c.id == scene_id).values(head_seq=head + 1)
-        )
-    return int(head + 1)
 
 
 def test_an_unreadable_event_is_a_409_and_repair_rebuilds_the_scene(

@@ -11,8 +11,8 @@ from service.app import create_app
 from service.bootstrap import Container
 from service.worker import Worker
 from tests.clients import local_client
-from tests.service.test_codec import batch_body, frame_body
-from tests.service.test_store_contract import added
+from tests.service.minimal_events import added
+from tests.wire_bodies import batch_body, frame_body
 
 
 @pytest.fixture
