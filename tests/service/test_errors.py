@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import asyncio
+import importlib
 import json
+import pkgutil
 from collections.abc import AsyncIterator
+from types import ModuleType
 from typing import Any
 
 import httpx
@@ -12,20 +15,31 @@ import pytest
 from fastapi import FastAPI, Request
 from starlette.types import Message
 
+import core
+import service
 from api_schema import BatchIn
 from codec.observations import decode_batch
 from core.errors import NotFound, StateConflict, UnknownTrack, field_path
-from pbdag_errors import PbdagError
+from pbdag_errors import Failure, PbdagError, Refused
+from service.access_errors import (
+    BodyTooLarge,
+    HostNotAllowed,
+    InsufficientScope,
+    NotAuthenticated,
+    RateLimitExceeded,
+)
 from service.errors import (
     INTERNAL,
     PROBLEM_MEDIA_TYPE,
     PROBLEMS,
+    headers_of,
     install_problem_handlers,
     problem_of,
 )
 from service.middleware.body_limit import BodySizeLimit
 from service.middleware.unexpected import UnexpectedErrors
 from service.store.errors import BatchConflict
+from service.store.queue_records import QueueFull
 from tests.wire_bodies import batch_body, frame_body
 
 MAX_BODY_BYTES = 200_000
@@ -324,6 +338,71 @@ def test_the_problem_table_is_looked_up_along_the_class_hierarchy() -> None:
     assert problem_of(StateConflict("x")).status == 409
     assert problem_of(Unregistered("x")) is INTERNAL
     assert problem_of(RuntimeError("x")) is INTERNAL
+
+
+def every_subclass(cls: type[BaseException]) -> set[type[BaseException]]:
+    """`cls`'s subclasses, at every depth, among the modules imported so far."""
+    found: set[type[BaseException]] = set()
+    for subclass in cls.__subclasses__():
+        found |= {subclass} | every_subclass(subclass)
+    return found
+
+
+def imported_everything(*packages: ModuleType) -> None:
+    for package in packages:
+        for module in pkgutil.walk_packages(package.__path__, f"{package.__name__}."):
+            importlib.import_module(module.name)
+
+
+# Refusals no request meets: these stop a command of `pbdag` before any request is served, and
+# these bases are never raised themselves.
+COMMAND_LINE_ONLY = {"SettingsError", "UnknownToken"}
+BASES = {"AccessProblem", "DomainError"}
+
+
+def test_what_a_client_can_cause_is_a_4xx_and_what_the_server_fails_at_a_500() -> None:
+    """The table reads along the two branches: every refusal of the service or the core has its
+    own 4xx (a quota's 507 aside), every failure is the bare 500."""
+    imported_everything(core, service)
+    ours = ("core.", "service.")
+    refusals = {
+        cls
+        for cls in every_subclass(Refused)
+        if cls.__module__.startswith(ours) and cls.__name__ not in COMMAND_LINE_ONLY | BASES
+    }
+    assert len(refusals) >= 20, sorted(cls.__name__ for cls in refusals)
+    status = {cls.__name__: problem_of(cls.__new__(cls)).status for cls in refusals}
+    assert {name: code for name, code in status.items() if not 400 <= code < 500} == {
+        "QuotaExceeded": 507
+    }
+    failures = {cls for cls in every_subclass(Failure) if cls.__module__.startswith(ours)}
+    assert len(failures) >= 6, sorted(cls.__name__ for cls in failures)
+    assert [cls.__name__ for cls in failures if problem_of(cls.__new__(cls)) is not INTERNAL] == []
+    assert [cls for cls, problem in PROBLEMS.items() if problem is INTERNAL] == [Failure]
+
+
+@pytest.mark.parametrize(
+    ("error", "headers"),
+    [
+        (NotAuthenticated("no token"), {"WWW-Authenticate": 'Bearer realm="pbdag"'}),
+        (
+            NotAuthenticated("revoked", token_error="invalid_token"),
+            {"WWW-Authenticate": 'Bearer realm="pbdag", error="invalid_token"'},
+        ),
+        (
+            InsufficientScope("read only", needed="write"),
+            {"WWW-Authenticate": 'Bearer realm="pbdag", error="insufficient_scope", scope="write"'},
+        ),
+        (RateLimitExceeded(7, per_minute=60, field=None), {"Retry-After": "7"}),
+        (QueueFull(10, 10, 3), {"Retry-After": "3"}),
+        (HostNotAllowed("evil.example"), None),
+        (BodyTooLarge(10), None),
+    ],
+)
+def test_the_headers_http_asks_for_come_from_the_table(
+    error: PbdagError, headers: dict[str, str] | None
+) -> None:
+    assert headers_of(error) == headers
 
 
 def test_a_500_keeps_the_keep_alive_connection() -> None:
