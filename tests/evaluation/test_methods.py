@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 import pytest
 
 from core.events import ObjectAdded, TrackRemoved
@@ -104,9 +107,32 @@ def test_a_method_needing_a_rule_the_core_lacks_is_unavailable_not_replaced() ->
     assert not method_named("PBD-AG").changes_the_loop and gated.changes_the_loop
 
 
-def test_every_method_s_parameters_are_valid_for_this_core() -> None:
+def leaves(
+    tree: Mapping[str, Any], sections: Mapping[str, Any], prefix: str = ""
+) -> dict[str, Any]:
+    """A parameter tree as dotted paths to values; a key is a section when it is one in
+    `sections` (the default tree)."""
+    found: dict[str, Any] = {}
+    for key, value in tree.items():
+        if isinstance(value, Mapping) and isinstance(sections.get(key), Mapping):
+            found |= leaves(value, sections[key], f"{prefix}{key}.")
+        else:
+            found[f"{prefix}{key}"] = value
+    return found
+
+
+def test_every_method_s_parameters_change_what_they_name_and_nothing_else() -> None:
+    """Each override is valid for this core, reaches the parameters as written, and differs
+    from the default (an override equal to it would claim a difference the row does not have)."""
+    defaults = Params().to_dict()
+    default = leaves(defaults, defaults)
     for method in DYNAMIC_METHODS + FIXTURE_METHODS:
-        Params.from_dict(method.params)  # raises InvalidParams naming the field
+        named = leaves(method.params, defaults)
+        resolved = leaves(Params.from_dict(method.params).to_dict(), defaults)
+        assert {path: resolved[path] for path in named} == named, method.name
+        changed = {path for path, value in resolved.items() if value != default[path]}
+        assert changed == set(named), method.name
+    assert any(method.params for method in DYNAMIC_METHODS + FIXTURE_METHODS)
 
 
 def test_dynamem_asks_the_core_for_free_space_misses() -> None:

@@ -125,14 +125,16 @@ def test_run_creates_a_scene_and_posts_every_frame_in_batches() -> None:
         BatchIn.model_validate(batch)  # what the service would accept, class_scores included
 
 
-def test_same_seed_sends_identical_batches() -> None:
+def test_same_seed_sends_identical_batches_and_another_seed_others() -> None:
     runs = []
-    for _ in range(2):
+    for seed in (3, 3, 4):
         service = FakeService()
         with client_for(service) as client:
-            robot.run_robot("", frames=2, frames_per_batch=2, seed=3, progress=False, client=client)
+            robot.run_robot(
+                "", frames=2, frames_per_batch=2, seed=seed, progress=False, client=client
+            )
         runs.append(service.batches)
-    assert runs[0] == runs[1]
+    assert runs[0] == runs[1] and runs[2] != runs[0]
 
 
 def test_the_robot_posts_the_batches_the_evaluation_reads() -> None:
