@@ -29,13 +29,14 @@ import time
 import uuid
 from collections.abc import Callable, Iterator
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import sqlalchemy as sa
 
 from bench.perf_common import write_results
+from bench.records import BlobBackendFigures, BlobBody, BlobsResult
 from bench.service_fleet import fresh_schema
 from core.params import Params
 from service.store.blobs import BlobStore, FileBlobStore, PgBlobStore
@@ -153,7 +154,7 @@ def stored_bytes(backend: Backend, folder: Path) -> int:
         return int(connection.execute(query).scalar_one())
 
 
-def bench(postgres_url: str, rounds: int, batches: int) -> dict[str, Any]:
+def bench(postgres_url: str, rounds: int, batches: int) -> BlobsResult:
     """Both body sizes on every backend; figures per backend and the ratios to the folder."""
     count = batches * rounds
     print(f"rendering {count} distinct 640x480 batch bodies of 1 and 2 frames ...", flush=True)
@@ -162,7 +163,7 @@ def bench(postgres_url: str, rounds: int, batches: int) -> dict[str, Any]:
         "compact-2-frames": list(canonical_bodies(count, 2, compact=True)),
         "compact-1-frame": list(canonical_bodies(count, 1, compact=True)),
     }
-    results: dict[str, Any] = {"rounds": rounds, "batches_per_round": batches, "bodies": {}}
+    bodies: dict[str, BlobBody] = {}
     for size_name, blobs in sizes.items():
         with (
             tempfile.TemporaryDirectory(prefix="pbdag-blob-bench-") as temp,
@@ -176,50 +177,52 @@ def bench(postgres_url: str, rounds: int, batches: int) -> dict[str, Any]:
                 order = built if round_index % 2 == 0 else list(reversed(built))
                 for backend in order:
                     one_round(backend, chunk, samples[backend.name])
-            figures: dict[str, Any] = {
-                "mean_blob_bytes": round(statistics.mean(len(b) for b in blobs)),
-                "backends": {},
-            }
+            figures: dict[str, BlobBackendFigures] = {}
             for backend in built:
                 put = samples[backend.name]["put_enqueue_ms"]
                 get = samples[backend.name]["get_ms"]
-                figures["backends"][backend.name] = {
-                    "put_enqueue_ms_median": round(statistics.median(put), 2),
-                    "put_enqueue_ms_p90": round(statistics.quantiles(put, n=10)[-1], 2),
-                    "get_ms_median": round(statistics.median(get), 2),
-                    "get_ms_p90": round(statistics.quantiles(get, n=10)[-1], 2),
-                    "disk_bytes_per_blob": round(stored_bytes(backend, Path(temp)) / len(blobs)),
-                }
-            base = figures["backends"]["postgres+folder"]
-            for name in ("postgres+table", "postgres+table-pglz"):
-                row = figures["backends"][name]
-                row["put_enqueue_vs_folder"] = round(
-                    row["put_enqueue_ms_median"] / base["put_enqueue_ms_median"], 2
+                figures[backend.name] = BlobBackendFigures(
+                    put_enqueue_ms_median=round(statistics.median(put), 2),
+                    put_enqueue_ms_p90=round(statistics.quantiles(put, n=10)[-1], 2),
+                    get_ms_median=round(statistics.median(get), 2),
+                    get_ms_p90=round(statistics.quantiles(get, n=10)[-1], 2),
+                    disk_bytes_per_blob=round(stored_bytes(backend, Path(temp)) / len(blobs)),
                 )
-                row["get_vs_folder"] = round(row["get_ms_median"] / base["get_ms_median"], 2)
-            results["bodies"][size_name] = figures
-    return results
+            base = figures["postgres+folder"]
+            for name in ("postgres+table", "postgres+table-pglz"):
+                row = figures[name]
+                figures[name] = replace(
+                    row,
+                    put_enqueue_vs_folder=round(
+                        row.put_enqueue_ms_median / base.put_enqueue_ms_median, 2
+                    ),
+                    get_vs_folder=round(row.get_ms_median / base.get_ms_median, 2),
+                )
+            mean_bytes = round(statistics.mean(len(b) for b in blobs))
+            bodies[size_name] = BlobBody(mean_blob_bytes=mean_bytes, backends=figures)
+    return BlobsResult(rounds=rounds, batches_per_round=batches, bodies=bodies)
 
 
-def print_table(results: dict[str, Any]) -> None:
+def print_table(results: BlobsResult) -> None:
     print(
-        f"\nper batch, medians (p90) over {results['rounds']} rounds x "
-        f"{results['batches_per_round']} batches; ratios: PostgreSQL table / folder, "
+        f"\nper batch, medians (p90) over {results.rounds} rounds x "
+        f"{results.batches_per_round} batches; ratios: PostgreSQL table / folder, "
         "both with the queue in PostgreSQL"
     )
     print(
         f"{'body':>16} {'backend':>20} {'put+enqueue ms':>18} {'get ms':>16} "
         f"{'disk KB':>8} {'ratio put':>9} {'ratio get':>9}"
     )
-    for size_name, figures in results["bodies"].items():
-        label = f"{size_name} {figures['mean_blob_bytes'] / 1e6:.2f} MB"
-        for name, row in figures["backends"].items():
+    for size_name, body in results.bodies.items():
+        label = f"{size_name} {body.mean_blob_bytes / 1e6:.2f} MB"
+        for name, row in body.backends.items():
+            put_ratio = "" if row.put_enqueue_vs_folder is None else row.put_enqueue_vs_folder
+            get_ratio = "" if row.get_vs_folder is None else row.get_vs_folder
             print(
                 f"{label:>16} {name:>20} "
-                f"{row['put_enqueue_ms_median']:>8.2f} ({row['put_enqueue_ms_p90']:>6.2f}) "
-                f"{row['get_ms_median']:>7.2f} ({row['get_ms_p90']:>6.2f}) "
-                f"{row['disk_bytes_per_blob'] / 1024:>8.0f} "
-                f"{row.get('put_enqueue_vs_folder', ''):>9} {row.get('get_vs_folder', ''):>9}"
+                f"{row.put_enqueue_ms_median:>8.2f} ({row.put_enqueue_ms_p90:>6.2f}) "
+                f"{row.get_ms_median:>7.2f} ({row.get_ms_p90:>6.2f}) "
+                f"{row.disk_bytes_per_blob / 1024:>8.0f} {put_ratio:>9} {get_ratio:>9}"
             )
 
 

@@ -6,11 +6,11 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
-from typing import Any
 
 import numpy as np
 
 from bench.perf_common import write_results
+from bench.records import LIVE_ONLY, DecideCondition, DecideResult
 from core.decide import decide
 from core.events import Event, ObjectAdded, TrackRetired
 from core.evolve import fold
@@ -158,7 +158,7 @@ def main(argv: list[str] | None = None) -> None:
     state = state_with_500_tracks(frame, args.seed)
     batch = Batch("bench", (frame,))
     states = {
-        "500 live tracks": state,
+        LIVE_ONLY: state,
         f"plus {args.hypotheses} retired hypotheses": with_hypotheses(
             state, args.hypotheses, True, args.seed
         ),
@@ -172,32 +172,33 @@ def main(argv: list[str] | None = None) -> None:
     for _ in range(args.repeats):
         for name, condition in states.items():  # interleaved: the machine's noise hits all alike
             samples[name].append(timed(condition, batch))
-    base = statistics.median(d + e for d, e, _n in samples["500 live tracks"])
-    results: dict[str, Any] = {
-        "masks": len(frame.detections),
-        "resolution": [frame.intrinsics.width, frame.intrinsics.height],
-        "repeats": args.repeats,
-        "goal_ms": 10.0,
-        "goal_ratio_with_hypotheses": 1.5,
-        "conditions": {},
-    }
+    base = statistics.median(d + e for d, e, _n in samples[LIVE_ONLY])
+    conditions: dict[str, DecideCondition] = {}
     for name, runs in samples.items():
         total = [d + e for d, e, _n in runs]
         median = statistics.median(total)
-        results["conditions"][name] = {
-            "tracks": len(states[name].tracks),
-            "events_per_batch": runs[0][2],
-            "decide_median_ms": statistics.median(d for d, _e, _n in runs),
-            "evolve_median_ms": statistics.median(e for _d, e, _n in runs),
-            "decide_evolve_median_ms": median,
-            "decide_evolve_p90_ms": statistics.quantiles(total, n=10)[-1],
-            "ratio_to_live_only": median / base,
-        }
+        conditions[name] = DecideCondition(
+            tracks=len(states[name].tracks),
+            events_per_batch=runs[0][2],
+            decide_median_ms=statistics.median(d for d, _e, _n in runs),
+            evolve_median_ms=statistics.median(e for _d, e, _n in runs),
+            decide_evolve_median_ms=median,
+            decide_evolve_p90_ms=statistics.quantiles(total, n=10)[-1],
+            ratio_to_live_only=median / base,
+        )
         print(
             f"{name:>32}: decide + evolve median {median:6.2f} ms "
             f"(p90 {statistics.quantiles(total, n=10)[-1]:6.2f}), {median / base:4.2f}x; "
             f"goal < 10 ms, and <= 1.5x with the hypotheses"
         )
+    results = DecideResult(
+        masks=len(frame.detections),
+        resolution=(frame.intrinsics.width, frame.intrinsics.height),
+        repeats=args.repeats,
+        goal_ms=10.0,
+        goal_ratio_with_hypotheses=1.5,
+        conditions=conditions,
+    )
     write_results("decide", results)
 
 

@@ -13,12 +13,12 @@ import dataclasses
 import statistics
 import time
 from collections.abc import Iterator
-from typing import Any
 
 import numpy as np
 
 from api_schema import BatchIn
 from bench.perf_common import write_results
+from bench.records import FixtureStepCondition, FixtureStepResult, Timings
 from codec.observations import decode_batch
 from core.decide import decide
 from core.evolve import fold
@@ -76,13 +76,13 @@ def fold_ms(state: SceneState, batch: Batch) -> tuple[SceneState, float]:
     return after, 1000 * (time.perf_counter() - started)
 
 
-def summary(samples: list[float]) -> dict[str, float]:
+def summary(samples: list[float]) -> Timings:
     """Median, p90 and max of a list of milliseconds."""
-    return {
-        "median_ms": statistics.median(samples),
-        "p90_ms": statistics.quantiles(samples, n=10)[-1] if len(samples) > 1 else samples[0],
-        "max_ms": max(samples),
-    }
+    return Timings(
+        median_ms=statistics.median(samples),
+        p90_ms=statistics.quantiles(samples, n=10)[-1] if len(samples) > 1 else samples[0],
+        max_ms=max(samples),
+    )
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -129,45 +129,46 @@ def main(argv: list[str] | None = None) -> None:
                 samples[name][f"{path}_cpu"].append(min(cpu for _wall, cpu in timings))
             conditions[name], fold_time = fold_ms(condition, batch)
             samples[name]["fold"].append(fold_time)
-    results: dict[str, Any] = {
-        "scenario": "hotel-suite",
-        "house_copies": copies,
-        "warmup_batches": args.warmup_batches,
-        "timed_batches": timed_batches,
-        "repeats": args.repeats,
-        "goal_ms": GOAL_MS,
-        "conditions": {},
-    }
+    timed: dict[str, FixtureStepCondition] = {}
     for name, by_path in samples.items():
         kept, anew = summary(by_path["incremental"]), summary(by_path["full"])
         kept_cpu, anew_cpu = summary(by_path["incremental_cpu"]), summary(by_path["full_cpu"])
         ratios = [f / i for f, i in zip(by_path["full"], by_path["incremental"], strict=True)]
         ratio = statistics.median(ratios)
         folded = summary(by_path["fold"])
-        results["conditions"][name] = {
-            "voxels": [min(sizes[name]), max(sizes[name])],
-            "incremental": kept,
-            "full": anew,
-            "incremental_cpu": kept_cpu,
-            "full_cpu": anew_cpu,
-            "fold_of_the_batch": folded,
-            "median_ratio_full_to_incremental": ratio,
-            "goal_met_wall": kept["median_ms"] <= GOAL_MS,
-            "goal_met_cpu": kept_cpu["median_ms"] <= GOAL_MS,
-        }
+        timed[name] = FixtureStepCondition(
+            voxels=(min(sizes[name]), max(sizes[name])),
+            incremental=kept,
+            full=anew,
+            incremental_cpu=kept_cpu,
+            full_cpu=anew_cpu,
+            fold_of_the_batch=folded,
+            median_ratio_full_to_incremental=ratio,
+            goal_met_wall=kept.median_ms <= GOAL_MS,
+            goal_met_cpu=kept_cpu.median_ms <= GOAL_MS,
+        )
         print(
             f"{name:>5} ({min(sizes[name]):,}-{max(sizes[name]):,} voxels), ms per batch, "
             f"median / p90 / max:\n"
-            f"       incremental wall {kept['median_ms']:6.2f} / {kept['p90_ms']:6.2f} / "
-            f"{kept['max_ms']:6.2f}, CPU {kept_cpu['median_ms']:6.2f} / {kept_cpu['p90_ms']:6.2f}"
-            f" / {kept_cpu['max_ms']:6.2f}\n"
-            f"       full        wall {anew['median_ms']:6.1f} / {anew['p90_ms']:6.1f} / "
-            f"{anew['max_ms']:6.1f}, CPU {anew_cpu['median_ms']:6.1f} / {anew_cpu['p90_ms']:6.1f}"
-            f" / {anew_cpu['max_ms']:6.1f}\n"
+            f"       incremental wall {kept.median_ms:6.2f} / {kept.p90_ms:6.2f} / "
+            f"{kept.max_ms:6.2f}, CPU {kept_cpu.median_ms:6.2f} / {kept_cpu.p90_ms:6.2f}"
+            f" / {kept_cpu.max_ms:6.2f}\n"
+            f"       full        wall {anew.median_ms:6.1f} / {anew.p90_ms:6.1f} / "
+            f"{anew.max_ms:6.1f}, CPU {anew_cpu.median_ms:6.1f} / {anew_cpu.p90_ms:6.1f}"
+            f" / {anew_cpu.max_ms:6.1f}\n"
             f"       full / incremental {ratio:5.1f}x (median per batch); the fold of the "
-            f"batch's events {folded['median_ms']:5.2f} ms; goal <= {GOAL_MS:.0f} ms per batch "
+            f"batch's events {folded.median_ms:5.2f} ms; goal <= {GOAL_MS:.0f} ms per batch "
             f"at 100k voxels"
         )
+    results = FixtureStepResult(
+        scenario="hotel-suite",
+        house_copies=copies,
+        warmup_batches=args.warmup_batches,
+        timed_batches=timed_batches,
+        repeats=args.repeats,
+        goal_ms=GOAL_MS,
+        conditions=timed,
+    )
     write_results("fixture_step", results)
 
 

@@ -30,6 +30,7 @@ from PIL import Image
 from pycocotools import mask as coco_mask
 
 from bench.perf_common import write_results
+from bench.records import MemoryCase, MemoryResult
 from service.settings import Settings
 
 PBDAG = [sys.executable, "-m", "service.cli"]
@@ -169,7 +170,7 @@ def peak_mb(process: subprocess.Popen[bytes]) -> float:
     return usage.ru_maxrss / 1024
 
 
-def run_case(name: str, make: Callable[[], list[dict[str, Any]]], root: Path) -> dict[str, Any]:
+def run_case(name: str, make: Callable[[], list[dict[str, Any]]], root: Path) -> MemoryCase:
     """Serve, post the batch, stop the API; drain with a worker; peak memory of both."""
     body: dict[str, Any] = {"batch_id": "largest", "frames": make()}
     content = httpx.Request("POST", "http://x", json=body).content
@@ -223,16 +224,16 @@ def run_case(name: str, make: Callable[[], list[dict[str, Any]]], root: Path) ->
         text=True,
         check=True,
     ).stdout.strip()
-    return {
-        "body_mb": len(content) / 2**20,
-        "frames": len(body["frames"]),
-        "detections": sum(len(f["detections"]) for f in body["frames"]),
-        "api_peak_mb": api_mb,
-        "worker_peak_mb": worker_mb,
-        "accept_seconds": accept_seconds,
-        "work_seconds": work_seconds,
-        "batch_status": status,
-    }
+    return MemoryCase(
+        body_mb=len(content) / 2**20,
+        frames=len(body["frames"]),
+        detections=sum(len(f["detections"]) for f in body["frames"]),
+        api_peak_mb=api_mb,
+        worker_peak_mb=worker_mb,
+        accept_seconds=accept_seconds,
+        work_seconds=work_seconds,
+        batch_status=status,
+    )
 
 
 _STATUS = """
@@ -250,20 +251,19 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--budget-mb", type=float, default=1024.0)
     args = parser.parse_args(argv)
-    results: dict[str, Any] = {"budget_mb": args.budget_mb, "cases": {}}
+    cases: dict[str, MemoryCase] = {}
     with tempfile.TemporaryDirectory(prefix="pbdag-memory-") as temp:
         for name, make in CASES.items():
-            case = run_case(name, make, Path(temp))
-            results["cases"][name] = case
-            within = max(case["api_peak_mb"], case["worker_peak_mb"]) <= args.budget_mb
+            case = cases[name] = run_case(name, make, Path(temp))
+            within = max(case.api_peak_mb, case.worker_peak_mb) <= args.budget_mb
             print(
-                f"{name:>38}: {case['body_mb']:5.1f} MB body, {case['frames']} frames, "
-                f"{case['detections']} detections -> API {case['api_peak_mb']:.0f} MB, worker "
-                f"{case['worker_peak_mb']:.0f} MB ({case['batch_status']}, "
-                f"{case['work_seconds']:.1f} s); budget {args.budget_mb:.0f} MB "
+                f"{name:>38}: {case.body_mb:5.1f} MB body, {case.frames} frames, "
+                f"{case.detections} detections -> API {case.api_peak_mb:.0f} MB, worker "
+                f"{case.worker_peak_mb:.0f} MB ({case.batch_status}, "
+                f"{case.work_seconds:.1f} s); budget {args.budget_mb:.0f} MB "
                 f"{'held' if within else 'EXCEEDED'}"
             )
-    write_results("memory", results)
+    write_results("memory", MemoryResult(budget_mb=args.budget_mb, cases=cases))
 
 
 if __name__ == "__main__":

@@ -13,12 +13,12 @@ import argparse
 import statistics
 import time
 from dataclasses import replace
-from typing import Any
 
 import numpy as np
 import orjson
 
 from bench.perf_common import write_results
+from bench.records import EvidenceSizes, PlanResult
 from core.navigation import Navigation
 from core.observation import Frame, Intrinsics
 from core.occupancy import UNKNOWN, MapGeometry, OccupancyGrid
@@ -112,7 +112,7 @@ def robot_poses(state: SceneState, count: int, seed: int) -> list[ViewPose]:
     return poses
 
 
-def evidence_sizes(frames: int) -> dict[str, Any]:
+def evidence_sizes(frames: int) -> EvidenceSizes:
     """Bytes and time of the occupancy evidence of one-frame 640 x 480 batches."""
     table = Box("table", "table", (4.0, 3.0, 0.375), (1.6, 0.9, 0.75), kind="fixture")
     shelf = Box("shelf", "shelf", (7.5, 5.5, 0.9), (0.4, 1.2, 1.8), kind="fixture")
@@ -136,13 +136,13 @@ def evidence_sizes(frames: int) -> dict[str, Any]:
         raw_times.append((time.perf_counter() - start) * 1000)
         assert event is not None
         sizes.append(len(orjson.dumps(event.details())))
-    return {
-        "frames": frames,
-        "bytes_per_batch_median": statistics.median(sizes),
-        "bytes_per_batch_max": max(sizes),
-        "evidence_ms_per_frame_median": round(statistics.median(times), 2),
-        "evidence_ms_per_frame_median_raw_depth": round(statistics.median(raw_times), 2),
-    }
+    return EvidenceSizes(
+        frames=frames,
+        bytes_per_batch_median=statistics.median(sizes),
+        bytes_per_batch_max=max(sizes),
+        evidence_ms_per_frame_median=round(statistics.median(times), 2),
+        evidence_ms_per_frame_median_raw_depth=round(statistics.median(raw_times), 2),
+    )
 
 
 def main() -> None:
@@ -166,32 +166,33 @@ def main() -> None:
         times.append((time.perf_counter() - start) * 1000)
         decisions.append(decided.decision)
     times.sort()
-    results: dict[str, Any] = {
-        "map_cells": list(state.occupancy.shape),
-        "resolution_m": RES,
-        "fixtures": len(state.tracks),
-        "decisions": len(times),
-        "ms_per_decision_median": round(statistics.median(times), 2),
-        "ms_per_decision_p90": round(times[int(0.9 * (len(times) - 1))], 2),
-        "ms_per_decision_max": round(times[-1], 2),
-        "navigation_ms_median": round(statistics.median(navigation_times), 2),
-        "outcomes": {d: decisions.count(d) for d in sorted(set(decisions))},
-        "goal_ms": 50,
-        "evidence": evidence_sizes(args.frames),
-    }
-    print(
-        f"plan on a {results['map_cells'][0]} x {results['map_cells'][1]} map (5 cm), "
-        f"{results['fixtures']} fixtures: median {results['ms_per_decision_median']} ms, "
-        f"p90 {results['ms_per_decision_p90']} ms, max {results['ms_per_decision_max']} ms per "
-        f"decision (navigation {results['navigation_ms_median']} ms; goal < 50 ms); "
-        f"{results['outcomes']}"
+    rows, columns = state.occupancy.shape
+    results = PlanResult(
+        map_cells=(rows, columns),
+        resolution_m=RES,
+        fixtures=len(state.tracks),
+        decisions=len(times),
+        ms_per_decision_median=round(statistics.median(times), 2),
+        ms_per_decision_p90=round(times[int(0.9 * (len(times) - 1))], 2),
+        ms_per_decision_max=round(times[-1], 2),
+        navigation_ms_median=round(statistics.median(navigation_times), 2),
+        outcomes={d: decisions.count(d) for d in sorted(set(decisions))},
+        goal_ms=50,
+        evidence=evidence_sizes(args.frames),
     )
-    evidence = results["evidence"]
+    print(
+        f"plan on a {rows} x {columns} map (5 cm), "
+        f"{results.fixtures} fixtures: median {results.ms_per_decision_median} ms, "
+        f"p90 {results.ms_per_decision_p90} ms, max {results.ms_per_decision_max} ms per "
+        f"decision (navigation {results.navigation_ms_median} ms; goal < 50 ms); "
+        f"{results.outcomes}"
+    )
+    evidence = results.evidence
     print(
         f"occupancy evidence of a 640 x 480 one-frame batch: median "
-        f"{evidence['bytes_per_batch_median']} bytes, max {evidence['bytes_per_batch_max']} "
-        f"bytes, {evidence['evidence_ms_per_frame_median']} ms per frame "
-        f"({evidence['evidence_ms_per_frame_median_raw_depth']} ms without the depth median)"
+        f"{evidence.bytes_per_batch_median} bytes, max {evidence.bytes_per_batch_max} "
+        f"bytes, {evidence.evidence_ms_per_frame_median} ms per frame "
+        f"({evidence.evidence_ms_per_frame_median_raw_depth} ms without the depth median)"
     )
     write_results("bench_plan", results)
 

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from bench.records import RenderResult, RenderRun, to_json
 from sim import DEMO_SCENARIO
 from sim.camera import CameraModel
 from sim.detector import detect
@@ -24,7 +23,7 @@ N_FRAMES = 100
 SEED = 0
 
 
-def measure_fps(n_frames: int, nthreads: int) -> dict[str, float]:
+def measure_fps(n_frames: int, nthreads: int) -> RenderRun:
     """Time render and detect over the demo run; worlds and poses are prepared beforehand.
 
     Render and detect are timed apart, so this loop calls them directly; what the robot posts
@@ -46,31 +45,30 @@ def measure_fps(n_frames: int, nthreads: int) -> dict[str, float]:
         detect(view, world, rng, recall=0.95, embedding_noise=0.05, boundary_leak_px=1)
         detect_seconds += time.perf_counter() - rendered
         render_seconds += rendered - started
-    return {
-        "frames": n_frames,
-        "render_ms_per_frame": 1000.0 * render_seconds / n_frames,
-        "detect_ms_per_frame": 1000.0 * detect_seconds / n_frames,
-        "fps": n_frames / (render_seconds + detect_seconds),
-    }
+    return RenderRun(
+        frames=n_frames,
+        render_ms_per_frame=1000.0 * render_seconds / n_frames,
+        detect_ms_per_frame=1000.0 * detect_seconds / n_frames,
+        fps=n_frames / (render_seconds + detect_seconds),
+    )
 
 
 def main() -> None:
     """Run single-thread and all-thread measurements, print them and save JSON."""
-    results: dict[str, Any] = {
-        "resolution": [CameraModel().width, CameraModel().height],
-        "cpu_count": os.cpu_count(),
-        "machine": platform.machine(),
-        "one_thread": measure_fps(N_FRAMES, nthreads=1),
-        "all_threads": measure_fps(N_FRAMES, nthreads=0),
-    }
-    for name in ("one_thread", "all_threads"):
-        run = results[name]
+    results = RenderResult(
+        resolution=(CameraModel().width, CameraModel().height),
+        cpu_count=os.cpu_count(),
+        machine=platform.machine(),
+        one_thread=measure_fps(N_FRAMES, nthreads=1),
+        all_threads=measure_fps(N_FRAMES, nthreads=0),
+    )
+    for name, run in (("one_thread", results.one_thread), ("all_threads", results.all_threads)):
         print(
-            f"{name:>11}: {run['fps']:.1f} frames/s "
-            f"(render {run['render_ms_per_frame']:.1f} ms + detect {run['detect_ms_per_frame']:.1f} ms)"
+            f"{name:>11}: {run.fps:.1f} frames/s "
+            f"(render {run.render_ms_per_frame:.1f} ms + detect {run.detect_ms_per_frame:.1f} ms)"
         )
     RESULTS_PATH.parent.mkdir(parents=True, exist_ok=True)
-    RESULTS_PATH.write_text(json.dumps(results, indent=2) + "\n")
+    RESULTS_PATH.write_text(to_json(results))
     print(f"wrote {RESULTS_PATH}")
 
 

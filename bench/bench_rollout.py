@@ -13,6 +13,7 @@ import statistics
 from pathlib import Path
 
 from bench.perf_common import write_results
+from bench.records import RolloutBenchResult
 from sim import SCENARIOS_DIR
 from sim.memories import InProcessMemory
 from sim.rollout import rollout
@@ -33,28 +34,28 @@ def main(argv: list[str] | None = None) -> None:
     plan_ms = sorted(result.plan_ms)
     p90 = plan_ms[min(len(plan_ms) - 1, int(0.9 * len(plan_ms)))]
     area = scenario.room_size[0] * scenario.room_size[1]
-    figures = {
-        "scenario": scenario.name,
-        "area_m2": area,
-        "seed": arguments.seed,
-        "rollout_s": round(result.seconds, 2),
-        "goal_rollout_s": 300,
-        "keyframes": len(result.keyframes),
-        "inspections": len(result.captures),
-        "path_m": round(result.path_length_m, 1),
-        "decisions": len(plan_ms),
-        "planner_ms_median": round(statistics.median(plan_ms), 2),
-        "planner_ms_p90": round(p90, 2),
-        "planner_ms_max": round(plan_ms[-1], 2),
-        "goal_planner_ms": 50,
-        "stop_reason": result.stop_reason,
-    }
+    figures = RolloutBenchResult(
+        scenario=scenario.name,
+        area_m2=area,
+        seed=arguments.seed,
+        rollout_s=round(result.seconds, 2),
+        goal_rollout_s=300,
+        keyframes=len(result.keyframes),
+        inspections=len(result.captures),
+        path_m=round(result.path_length_m, 1),
+        decisions=len(plan_ms),
+        planner_ms_median=round(statistics.median(plan_ms), 2),
+        planner_ms_p90=round(p90, 2),
+        planner_ms_max=round(plan_ms[-1], 2),
+        goal_planner_ms=50,
+        stop_reason=result.stop_reason,
+    )
     print(
         f"{scenario.name} ({area:.0f} m^2), seed {arguments.seed}: rollout {result.seconds:.1f} s "
         f"(goal < 300 s): {len(result.keyframes)} keyframes, {len(result.captures)} inspections, "
         f"path {result.path_length_m:.0f} m; planner per decision: median "
-        f"{figures['planner_ms_median']} ms, p90 {figures['planner_ms_p90']} ms, max "
-        f"{figures['planner_ms_max']} ms over {len(plan_ms)} decisions (goal < 50 ms)"
+        f"{figures.planner_ms_median} ms, p90 {figures.planner_ms_p90} ms, max "
+        f"{figures.planner_ms_max} ms over {len(plan_ms)} decisions (goal < 50 ms)"
     )
     write_results("bench_rollout", figures)
 

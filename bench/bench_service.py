@@ -26,6 +26,7 @@ unbounded scene queue (so an overloaded worker shows as a backlog, not as 429s).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import signal
@@ -44,15 +45,10 @@ from pathlib import Path
 import httpx
 
 from bench.perf_common import write_results
+from bench.records import Figures, ServiceResult
 from bench.service_fleet import Fleet, free_port, machine_busy_seconds, postgres_schema
 from bench.service_load import BodyTemplate, render_templates, stage_breakdown
-from bench.service_report import (
-    GOAL_RATE,
-    Figures,
-    percentile,
-    table,
-    verdicts,
-)
+from bench.service_report import GOAL_RATE, percentile, table, verdicts
 
 POSTING_THREADS = 128  # concurrent POSTs; beyond, a send waits (its lag is reported)
 
@@ -400,31 +396,32 @@ def main(argv: list[str] | None = None) -> None:
     found = verdicts(rows, args.rate, ramp)
     print(f"CPU stages of one batch in one process (median ms): {json.dumps(breakdown)}")
     print(f"load average before the run: {load_average} (other users of the machine count)")
-    for name, verdict in found.items():
-        print(f"{name}: {json.dumps(verdict)}")
+    for name, verdict in dataclasses.asdict(found).items():
+        if verdict is not None:
+            print(f"{name}: {json.dumps(verdict)}")
     stamp = time.strftime("%Y%m%d-%H%M%S")
     write_results(
         args.name or f"service-{stamp}",
-        {
-            "benchmark": "service end to end",
-            "rate_per_scene": args.rate,
-            "seconds": seconds,
-            "body_bytes_mean": int(statistics.mean(sizes)),
-            "object_masks": templates[0].objects,
-            "fixture_masks": [t.fixtures for t in templates],
-            "clock": "latency to done: the batch's finished_at minus its scheduled send time "
+        ServiceResult(
+            benchmark="service end to end",
+            rate_per_scene=args.rate,
+            seconds=seconds,
+            body_bytes_mean=int(statistics.mean(sizes)),
+            object_masks=templates[0].objects,
+            fixture_masks=[t.fixtures for t in templates],
+            clock="latency to done: the batch's finished_at minus its scheduled send time "
             "(time.time()), one machine's wall clock; send_lag_p99_ms is how late sends started",
-            "service_settings": {
+            service_settings={
                 "PBDAG_ALLOW_ANONYMOUS_LOCAL": "true",
                 "PBDAG_RATE_LIMIT_PER_MINUTE": "0",
                 "PBDAG_MAX_QUEUED_BATCHES_PER_SCENE": "1000000",
                 "PBDAG_LOG_LEVEL": "WARNING",
             },
-            "load_average_at_start": load_average,
-            "stage_breakdown_ms": breakdown,
-            "configs": {key: {**vars(f), "offered": f.offered} for key, f in rows.items()},
-            "goals": found,
-        },
+            load_average_at_start=load_average,
+            stage_breakdown_ms=breakdown,
+            configs=rows,
+            goals=found,
+        ),
     )
 
 

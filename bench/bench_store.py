@@ -35,7 +35,6 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import orjson
@@ -43,6 +42,16 @@ import sqlalchemy as sa
 from tqdm import tqdm
 
 from bench.perf_common import synthetic_events, write_results
+from bench.records import (
+    AppendRate,
+    AppendResult,
+    AsOfBackend,
+    AsOfResult,
+    RawResult,
+    SnapshotStorage,
+    VersusResult,
+    VersusRow,
+)
 from bench.store_appenders import (
     VERSUS_BATCHES,
     VERSUS_EVENTS,
@@ -117,27 +126,30 @@ def append_all(
 
 def bench_append(args: argparse.Namespace) -> None:
     """Events appended per second, in batches, per backend."""
-    results: dict[str, Any] = {
-        "events": args.events,
-        "batch": args.batch,
-        "goal_events_per_s": 20000,
-    }
+    rates: dict[str, AppendRate] = {}
     with engines(args.postgres) as built:
         for name, engine in built:
             log = EventLog(engine)
             scene = new_scene(log)
             seconds = append_all(log, scene.id, args.events, args.batch)
             rate = args.events / seconds
-            results[name] = {"seconds": seconds, "events_per_s": rate}
+            rates[name] = AppendRate(seconds=seconds, events_per_s=rate)
             print(
                 f"{name:>8}: {rate:,.0f} events/s appended in batches of {args.batch} (goal > 20,000)"
             )
+    results = AppendResult(
+        events=args.events,
+        batch=args.batch,
+        goal_events_per_s=20000,
+        sqlite=rates.get("sqlite"),
+        postgres=rates.get("postgres"),
+    )
     write_results("store-append", results)
 
 
 def bench_as_of(args: argparse.Namespace) -> None:
     """as_of latency (snapshot + tail) on a long log against a full replay."""
-    results: dict[str, Any] = {"events": args.events, "snapshot_interval": args.snapshot_interval}
+    rows: dict[str, AsOfBackend] = {}
     rng = np.random.default_rng(0)
     with engines(args.postgres) as built:
         for name, engine in built:
@@ -164,26 +176,33 @@ def bench_as_of(args: argparse.Namespace) -> None:
             check = log.load_state(scene.id)
             assert check.to_dict() == replayed.to_dict(), "snapshot + tail differs from the replay"
             median = statistics.median(latencies)
-            results[name] = {
-                "head_seq": head,
-                "as_of_median_ms": median,
-                "as_of_p90_ms": statistics.quantiles(latencies, n=10)[-1],
-                "full_replay_ms": replay_ms,
-                "speedup": replay_ms / median,
-                "database_bytes": database_bytes(engine),
-                **snapshot_storage(engine),
-                "build_seconds": build_seconds,
-            }
+            storage = snapshot_storage(engine)
+            row = rows[name] = AsOfBackend(
+                head_seq=head,
+                as_of_median_ms=median,
+                as_of_p90_ms=statistics.quantiles(latencies, n=10)[-1],
+                full_replay_ms=replay_ms,
+                speedup=replay_ms / median,
+                database_bytes=database_bytes(engine),
+                snapshots=storage.snapshots,
+                snapshot_bytes=storage.snapshot_bytes,
+                build_seconds=build_seconds,
+            )
             print(
-                f"{name:>8}: as_of median {median:.1f} ms (p90 {results[name]['as_of_p90_ms']:.1f}) vs full replay "
+                f"{name:>8}: as_of median {median:.1f} ms (p90 {row.as_of_p90_ms:.1f}) vs full replay "
                 f"{replay_ms / 1000:.1f} s: {replay_ms / median:,.0f}x faster (goal < 20 ms and >= 50x)"
             )
-            row = results[name]
             print(
-                f"{'':>8}  {row['snapshots']:,} snapshots, {row['snapshot_bytes'] / 1e6:,.0f} MB "
-                f"({row['snapshot_bytes'] / head:,.0f} bytes per event; the database "
-                f"{row['database_bytes'] / 1e6:,.0f} MB); built in {build_seconds:.0f} s"
+                f"{'':>8}  {row.snapshots:,} snapshots, {row.snapshot_bytes / 1e6:,.0f} MB "
+                f"({row.snapshot_bytes / head:,.0f} bytes per event; the database "
+                f"{row.database_bytes / 1e6:,.0f} MB); built in {build_seconds:.0f} s"
             )
+    results = AsOfResult(
+        events=args.events,
+        snapshot_interval=args.snapshot_interval,
+        sqlite=rows.get("sqlite"),
+        postgres=rows.get("postgres"),
+    )
     write_results("store-as-of", results)
 
 
@@ -196,12 +215,7 @@ def bench_versus(args: argparse.Namespace) -> None:
         sys.exit("bench_store versus needs the bench extra: pip install -e '.[bench]'")
     stream = list(synthetic_events(max(VERSUS_EVENTS.values())))
     sizes = [len(orjson.dumps(event.details())) for event in stream]
-    results: dict[str, Any] = {
-        "rounds": args.rounds,
-        "events_per_measurement": VERSUS_EVENTS,
-        "event_json_bytes_mean": statistics.fmean(sizes),
-        "peer": peer,
-    }
+    by_backend: dict[str, dict[str, VersusRow]] = {}
     print(f"events of {statistics.fmean(sizes):,.0f} bytes of JSON on average")
     with engines(args.postgres) as built, tempfile.TemporaryDirectory() as folder:
         for name, engine in built:
@@ -229,21 +243,8 @@ def bench_versus(args: argparse.Namespace) -> None:
             finally:
                 for appender in pair:
                     appender.close()
-            results[name] = {
-                str(batch): {
-                    "ours_events_per_s": statistics.median(samples["ours"][batch]),
-                    "eventsourcing_events_per_s": statistics.median(
-                        samples["eventsourcing"][batch]
-                    ),
-                    "ratio": statistics.median(samples["ours"][batch])
-                    / statistics.median(samples["eventsourcing"][batch]),
-                    "eventsourcing_per_track_events_per_s": statistics.median(
-                        samples["eventsourcing per track"][batch]
-                    ),
-                    "ratio_per_track": statistics.median(samples["ours"][batch])
-                    / statistics.median(samples["eventsourcing per track"][batch]),
-                    "samples": {key: samples[key][batch] for key in samples},
-                }
+            by_backend[name] = {
+                str(batch): versus_row({key: samples[key][batch] for key in samples})
                 for batch in VERSUS_BATCHES
             }
     print(f"\nevents appended per second, median of {args.rounds} interleaved rounds")
@@ -253,14 +254,37 @@ def bench_versus(args: argparse.Namespace) -> None:
     )
     for name, _ in built:
         for batch in VERSUS_BATCHES:
-            row = results[name][str(batch)]
+            row = by_backend[name][str(batch)]
             print(
-                f"{name:<10}{batch:>6}{row['ours_events_per_s']:>10,.0f}"
-                f"{row['eventsourcing_events_per_s']:>15,.0f}{row['ratio']:>13.2f}"
-                f"{row['eventsourcing_per_track_events_per_s']:>11,.0f}"
-                f"{row['ratio_per_track']:>13.2f}"
+                f"{name:<10}{batch:>6}{row.ours_events_per_s:>10,.0f}"
+                f"{row.eventsourcing_events_per_s:>15,.0f}{row.ratio:>13.2f}"
+                f"{row.eventsourcing_per_track_events_per_s:>11,.0f}"
+                f"{row.ratio_per_track:>13.2f}"
             )
+    results = VersusResult(
+        rounds=args.rounds,
+        events_per_measurement=VERSUS_EVENTS,
+        event_json_bytes_mean=statistics.fmean(sizes),
+        peer=peer,
+        sqlite=by_backend.get("sqlite"),
+        postgres=by_backend.get("postgres"),
+    )
     write_results("store-versus", results)
+
+
+def versus_row(samples: dict[str, list[float]]) -> VersusRow:
+    """The medians of one batch size's rounds, by appender, and ours against theirs."""
+    ours = statistics.median(samples["ours"])
+    theirs = statistics.median(samples["eventsourcing"])
+    per_track = statistics.median(samples["eventsourcing per track"])
+    return VersusRow(
+        ours_events_per_s=ours,
+        eventsourcing_events_per_s=theirs,
+        ratio=ours / theirs,
+        eventsourcing_per_track_events_per_s=per_track,
+        ratio_per_track=ours / per_track,
+        samples=samples,
+    )
 
 
 def bench_raw(args: argparse.Namespace) -> None:
@@ -295,40 +319,40 @@ def bench_raw(args: argparse.Namespace) -> None:
         event_bytes += [len(orjson.dumps(event.details())) for event in events]
     steady = events_per_batch[len(events_per_batch) // 2 :]
     per_event = statistics.fmean(steady)
-    results: dict[str, Any] = {
-        "frames": args.frames,
-        "zstd_level": ZSTD_LEVEL,
-        "json_base64_bytes_per_frame": statistics.fmean(before),
-        "compact_bytes_per_frame": statistics.fmean(after),
-        "compact_max_bytes_per_frame": max(after),
-        "ratio": statistics.fmean(after) / statistics.fmean(before),
-        "encode_ms_median": statistics.median(encode_ms),
-        "decode_ms_median": statistics.median(decode_ms),
-        "events_per_frame_steady": per_event,
-        "compact_raw_bytes_per_event": statistics.fmean(after) / per_event,
-        "json_base64_raw_bytes_per_event": statistics.fmean(before) / per_event,
-        "event_details_bytes_mean": statistics.fmean(event_bytes),
-        "goal_bytes_per_frame": 300_000,
-    }
-    print(
-        f"raw batch per 640x480 frame: {results['json_base64_bytes_per_frame'] / 1e6:.3f} MB as "
-        f"JSON with base64 depth -> {results['compact_bytes_per_frame'] / 1e6:.3f} MB compact "
-        f"(x{results['ratio']:.2f}; max {max(after) / 1e6:.3f} MB; goal 0.300 MB)"
+    results = RawResult(
+        frames=args.frames,
+        zstd_level=ZSTD_LEVEL,
+        json_base64_bytes_per_frame=statistics.fmean(before),
+        compact_bytes_per_frame=statistics.fmean(after),
+        compact_max_bytes_per_frame=max(after),
+        ratio=statistics.fmean(after) / statistics.fmean(before),
+        encode_ms_median=statistics.median(encode_ms),
+        decode_ms_median=statistics.median(decode_ms),
+        events_per_frame_steady=per_event,
+        compact_raw_bytes_per_event=statistics.fmean(after) / per_event,
+        json_base64_raw_bytes_per_event=statistics.fmean(before) / per_event,
+        event_details_bytes_mean=statistics.fmean(event_bytes),
+        goal_bytes_per_frame=300_000,
     )
     print(
-        f"encode {results['encode_ms_median']:.2f} ms, decode {results['decode_ms_median']:.2f} ms "
+        f"raw batch per 640x480 frame: {results.json_base64_bytes_per_frame / 1e6:.3f} MB as "
+        f"JSON with base64 depth -> {results.compact_bytes_per_frame / 1e6:.3f} MB compact "
+        f"(x{results.ratio:.2f}; max {max(after) / 1e6:.3f} MB; goal 0.300 MB)"
+    )
+    print(
+        f"encode {results.encode_ms_median:.2f} ms, decode {results.decode_ms_median:.2f} ms "
         "per frame (median)"
     )
     print(
         f"{per_event:.1f} events per frame (steady state): raw "
-        f"{results['compact_raw_bytes_per_event'] / 1e3:.1f} kB per event compact "
-        f"({results['json_base64_raw_bytes_per_event'] / 1e3:.1f} kB before); an event's "
-        f"details are {results['event_details_bytes_mean']:.0f} bytes of JSON"
+        f"{results.compact_raw_bytes_per_event / 1e3:.1f} kB per event compact "
+        f"({results.json_base64_raw_bytes_per_event / 1e3:.1f} kB before); an event's "
+        f"details are {results.event_details_bytes_mean:.0f} bytes of JSON"
     )
     write_results("store-raw", results)
 
 
-def snapshot_storage(engine: sa.Engine) -> dict[str, int]:
+def snapshot_storage(engine: sa.Engine) -> SnapshotStorage:
     """How many snapshots, and the bytes of their bodies."""
     with engine.connect() as connection:
         count, size = connection.execute(
@@ -336,7 +360,7 @@ def snapshot_storage(engine: sa.Engine) -> dict[str, int]:
                 sa.func.count(), sa.func.coalesce(sa.func.sum(sa.func.length(snapshots.c.body)), 0)
             )
         ).one()
-    return {"snapshots": int(count), "snapshot_bytes": int(size)}
+    return SnapshotStorage(snapshots=int(count), snapshot_bytes=int(size))
 
 
 def database_bytes(engine: sa.Engine) -> int:

@@ -2,28 +2,31 @@
 
 from __future__ import annotations
 
-import json
 import os
 import platform
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from bench.records import to_json
 from core.events import Event, ObjectAdded, ObjectObserved, VisibleMiss
 from core.values import Observation
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 EMBEDDING_DIM = 64
 
 
-def write_results(name: str, results: dict[str, Any]) -> Path:
-    """Save a benchmark's figures as JSON under bench/results/ (git-ignored)."""
-    results = {"machine": platform.machine(), "cpu_count": os.cpu_count(), **results}
+def write_results(name: str, record: DataclassInstance) -> Path:
+    """Save a benchmark's record (bench/records.py) as JSON under bench/results/ (git-ignored),
+    with the machine it ran on."""
     path = RESULTS_DIR / f"{name}.json"
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=2) + "\n")
+    path.write_text(to_json(record, machine=platform.machine(), cpu_count=os.cpu_count()))
     print(f"wrote {path}")
     return path
 

@@ -5,48 +5,22 @@ from __future__ import annotations
 
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, field
-from typing import Any
 
 import numpy as np
+
+from bench.records import (
+    AtRate,
+    Capacity,
+    CpuBound,
+    Figures,
+    Scaling,
+    ServiceGoals,
+    Sustained,
+)
 
 GOAL_RATE = 30.0  # frames per second of one robot
 GOAL_P99_MS = 200.0
 GOAL_SCALING = 1.8
-
-
-@dataclass
-class Figures:
-    """What one configuration measured."""
-
-    config: str
-    title: str
-    rate_per_scene: float
-    scenes: int
-    workers: int
-    seconds: float
-    batches: int = 0
-    accepted: int = 0
-    done: int = 0
-    send_lag_p99_ms: float = 0.0
-    throughput: float = 0.0
-    post_p50_ms: float = 0.0
-    post_p99_ms: float = 0.0
-    done_p50_ms: float = 0.0
-    done_p99_ms: float = 0.0
-    done_max_ms: float = 0.0
-    backlog_at_end: int = 0
-    drain_seconds: float = 0.0
-    decide_mean_ms: float | None = None
-    append_mean_ms: float | None = None
-    cpu_seconds: dict[str, float] = field(default_factory=dict)
-    machine_busy_cores: float = 0.0
-    load_generator_cpu_seconds: float = 0.0
-    errors: list[str] = field(default_factory=list)
-
-    @property
-    def offered(self) -> float:
-        return self.rate_per_scene * self.scenes
 
 
 def percentile(values: Sequence[float], q: float) -> float:
@@ -84,13 +58,13 @@ def sustained(figures: Figures) -> bool:
     )
 
 
-def cpu_bound(rows: dict[str, Figures]) -> dict[str, Any]:
+def cpu_bound(rows: dict[str, Figures]) -> CpuBound | None:
     """What the CPU seconds per batch allow on this machine's cores, even if nothing else ran:
     one worker uses at most one core; API and workers together at most all of them (PostgreSQL's
     own share is not counted, so these are upper bounds)."""
     measured = [rows[key] for key in ("b", "c", "d") if key in rows and rows[key].done]
     if not measured:
-        return {}
+        return None
     worker = sum(
         v for f in measured for k, v in f.cpu_seconds.items() if k.startswith("worker")
     ) / sum(f.done for f in measured)
@@ -98,62 +72,60 @@ def cpu_bound(rows: dict[str, Figures]) -> dict[str, Any]:
     cores = os.cpu_count() or 1
     one = min(1.0 / worker, cores / (worker + api))
     two = min(2.0 / worker, cores / (worker + api))
-    return {
-        "worker_cpu_ms_per_batch": round(1e3 * worker, 1),
-        "api_cpu_ms_per_batch": round(1e3 * api, 1),
-        "cores": cores,
-        "one_worker_max_per_s": round(one, 1),
-        "two_workers_max_per_s": round(two, 1),
-        "two_worker_ratio_max": round(two / one, 2),
-        # One worker also waits (PostgreSQL, the claim, the idle poll), so it does less than
-        # its CPU bound; against what it did, two workers could gain more.
-        "two_workers_max_over_measured_one": round(two / rows["d"].throughput, 2)
+    return CpuBound(
+        worker_cpu_ms_per_batch=round(1e3 * worker, 1),
+        api_cpu_ms_per_batch=round(1e3 * api, 1),
+        cores=cores,
+        one_worker_max_per_s=round(one, 1),
+        two_workers_max_per_s=round(two, 1),
+        two_worker_ratio_max=round(two / one, 2),
+        two_workers_max_over_measured_one=round(two / rows["d"].throughput, 2)
         if "d" in rows and rows["d"].throughput
         else None,
-    }
+    )
 
 
-def verdicts(rows: dict[str, Figures], rate: float, ramp: Sequence[float] = ()) -> dict[str, Any]:
+def verdicts(rows: dict[str, Figures], rate: float, ramp: Sequence[float] = ()) -> ServiceGoals:
     """The issue's goals against what was measured."""
-    found: dict[str, Any] = {}
+    sustains = None
     steps = [rows[key] for key in rows if "@" in key]
     if steps:
         kept = [f for f in steps if sustained(f)]
         best = max(kept, key=lambda f: f.offered) if kept else None
-        found["one_worker_sustains_per_s"] = {
-            "rates_tried": list(ramp),
-            "highest_sustained": None if best is None else best.offered,
-            "done_p50_ms": None if best is None else best.done_p50_ms,
-            "done_p99_ms": None if best is None else best.done_p99_ms,
-        }
+        sustains = Sustained(
+            rates_tried=list(ramp),
+            highest_sustained=None if best is None else best.offered,
+            done_p50_ms=None if best is None else best.done_p50_ms,
+            done_p99_ms=None if best is None else best.done_p99_ms,
+        )
+    at_rate = None
     one = rows.get("b") or rows.get("a")
     if one is not None:
         keeps_up = sustained(one)
-        found["one_worker_at_rate"] = {
-            "config": one.config,
-            "rate": rate,
-            "goal": f">= {GOAL_RATE:.0f}/s with done p99 < {GOAL_P99_MS:.0f} ms",
-            "keeps_up": keeps_up,
-            "done_p99_ms": one.done_p99_ms,
-            "met": keeps_up and rate >= GOAL_RATE and one.done_p99_ms < GOAL_P99_MS,
-        }
+        at_rate = AtRate(
+            config=one.config,
+            rate=rate,
+            goal=f">= {GOAL_RATE:.0f}/s with done p99 < {GOAL_P99_MS:.0f} ms",
+            keeps_up=keeps_up,
+            done_p99_ms=one.done_p99_ms,
+            met=keeps_up and rate >= GOAL_RATE and one.done_p99_ms < GOAL_P99_MS,
+        )
+    scaling = None
     if "c" in rows and "d" in rows and rows["d"].throughput:
         ratio = rows["c"].throughput / rows["d"].throughput
-        found["two_workers_scaling"] = {
-            "goal": f">= {GOAL_SCALING}x one worker (2 scenes each)",
-            "ratio": round(ratio, 2),
-            "one_worker_saturated": rows["d"].throughput < 0.95 * rows["d"].offered,
-            "met": ratio >= GOAL_SCALING,
-        }
-    bound = cpu_bound(rows)
-    if bound:
-        found["cpu_bound"] = bound
+        scaling = Scaling(
+            goal=f">= {GOAL_SCALING}x one worker (2 scenes each)",
+            ratio=round(ratio, 2),
+            one_worker_saturated=rows["d"].throughput < 0.95 * rows["d"].offered,
+            met=ratio >= GOAL_SCALING,
+        )
+    capacity = None
     if "d" in rows:
         d = rows["d"]
-        found["one_worker_capacity_per_s"] = {
-            "value": d.throughput,
-            "bound": "measured (the worker was saturated)"
+        capacity = Capacity(
+            value=d.throughput,
+            bound="measured (the worker was saturated)"
             if d.throughput < 0.95 * d.offered
             else "at least (the worker kept up with the offered load)",
-        }
-    return found
+        )
+    return ServiceGoals(sustains, at_rate, scaling, cpu_bound(rows), capacity)

@@ -20,8 +20,25 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
+from pydantic import ValidationError
+
+from bench.records import (
+    AppendResult,
+    AsOfResult,
+    BlobsResult,
+    DecideResult,
+    FixtureStepResult,
+    MemoryResult,
+    PlanResult,
+    RawResult,
+    RenderResult,
+    RolloutBenchResult,
+    ServiceResult,
+    VersusResult,
+    read_record,
+)
 from bench.summary_readers import (
     GOALS,
     Figure,
@@ -39,6 +56,7 @@ from bench.summary_readers import (
     read_versus,
 )
 
+Result = TypeVar("Result")
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
 README = Path(__file__).resolve().parent.parent / "README.md"
 START_MARKER = "<!-- bench-table:start -->"
@@ -66,7 +84,7 @@ class Row:
     written: str = ""  # when the result file was written (UTC), so a stale figure shows
 
 
-def judged(bench: Bench, figure: Figure, source: str) -> Row:
+def judged(bench: Bench[Any], figure: Figure, source: str) -> Row:
     """A figure with its goal's text and verdict."""
     goal = GOALS[figure.goal] if figure.goal else None
     verdict, met = figure.verdict, figure.met
@@ -93,13 +111,14 @@ def judged(bench: Bench, figure: Figure, source: str) -> Row:
 
 
 @dataclass(frozen=True)
-class Bench:
-    """A benchmark: how it is run, the file it writes, and how its figures are read."""
+class Bench(Generic[Result]):
+    """A benchmark: how it is run, the file it writes, its record, and how its figures are read."""
 
     key: str
     command: str  # as in the README's command column (module, then subcommand)
     pattern: str  # the file name under bench/results/ (a glob: the newest match is read)
-    read: Callable[[dict[str, Any]], list[Figure]]
+    record: type[Result]  # what the benchmark writes (bench/records.py)
+    read: Callable[[Result], list[Figure]]
     goals: tuple[str, ...] = field(default=())
     notes: str = ""  # where the README explains the figures (why a goal is missed)
 
@@ -109,12 +128,20 @@ class Bench:
         return invocation(self.command) or self.command
 
 
-BENCHES: tuple[Bench, ...] = (
-    Bench("render", "python -m bench.bench_render", "render.json", read_render, ("render",)),
+BENCHES: tuple[Bench[Any], ...] = (
+    Bench(
+        "render",
+        "python -m bench.bench_render",
+        "render.json",
+        RenderResult,
+        read_render,
+        ("render",),
+    ),
     Bench(
         "decide",
         "python -m bench.bench_decide",
         "decide.json",
+        DecideResult,
         read_decide,
         ("decide", "decide_hypotheses"),
     ),
@@ -122,15 +149,19 @@ BENCHES: tuple[Bench, ...] = (
         "fixture_step",
         "python -m bench.bench_fixture_step",
         "fixture_step.json",
+        FixtureStepResult,
         read_fixture_step,
         ("fixture_step",),
         notes="bench/README.md#the-fixture-step",
     ),
-    Bench("plan", "python -m bench.bench_plan", "bench_plan.json", read_plan, ("plan",)),
+    Bench(
+        "plan", "python -m bench.bench_plan", "bench_plan.json", PlanResult, read_plan, ("plan",)
+    ),
     Bench(
         "rollout",
         "python -m bench.bench_rollout",
         "bench_rollout.json",
+        RolloutBenchResult,
         read_rollout,
         ("rollout", "rollout_planner"),
     ),
@@ -138,6 +169,7 @@ BENCHES: tuple[Bench, ...] = (
         "store-append",
         "python -m bench.bench_store append --postgres URL",
         "store-append.json",
+        AppendResult,
         read_append,
         ("append",),
     ),
@@ -145,6 +177,7 @@ BENCHES: tuple[Bench, ...] = (
         "store-as-of",
         "python -m bench.bench_store as-of --postgres URL",
         "store-as-of.json",
+        AsOfResult,
         read_as_of,
         ("as_of",),
         notes="bench/README.md#as_of",
@@ -153,6 +186,7 @@ BENCHES: tuple[Bench, ...] = (
         "store-versus",
         "python -m bench.bench_store versus --postgres URL",
         "store-versus.json",
+        VersusResult,
         read_versus,
         ("versus",),
         notes="bench/README.md#appending-against-the-eventsourcing-library",
@@ -161,6 +195,7 @@ BENCHES: tuple[Bench, ...] = (
         "store-raw",
         "python -m bench.bench_store raw",
         "store-raw.json",
+        RawResult,
         read_raw,
         ("raw",),
         notes="bench/README.md#raw-batches",
@@ -169,6 +204,7 @@ BENCHES: tuple[Bench, ...] = (
         "blobs",
         "python -m bench.bench_blobs --postgres URL",
         "blobs.json",
+        BlobsResult,
         read_blobs,
         notes="#running-on-several-hosts",
     ),
@@ -176,6 +212,7 @@ BENCHES: tuple[Bench, ...] = (
         "memory",
         "python -m bench.bench_memory",
         "memory.json",
+        MemoryResult,
         read_memory,
         ("memory",),
         notes="#limits-backpressure-and-failures",
@@ -184,6 +221,7 @@ BENCHES: tuple[Bench, ...] = (
         "service",
         "python -m bench.bench_service --postgres URL --ramp 6,8,10,12",
         "service-*.json",
+        ServiceResult,
         read_service,
         ("service_one_worker", "service_two_workers"),
         notes="bench/README.md",
@@ -199,13 +237,13 @@ def invocation(command: str) -> str | None:
     return " ".join(part for part in found.groups() if part)
 
 
-def result_file(results: Path, bench: Bench) -> Path | None:
+def result_file(results: Path, bench: Bench[Any]) -> Path | None:
     """The file the benchmark wrote (the newest, when its name carries the time), or None."""
     found = sorted(results.glob(bench.pattern), key=lambda path: (path.stat().st_mtime, path.name))
     return found[-1] if found else None
 
 
-def rows_of(bench: Bench, results: Path) -> list[Row]:
+def rows_of(bench: Bench[Any], results: Path) -> list[Row]:
     """The benchmark's rows: its figures judged, or one row saying it was not run or cannot be
     read (a file of another shape: the benchmark changed, or the file was cut short)."""
     path = result_file(results, bench)
@@ -215,8 +253,20 @@ def rows_of(bench: Bench, results: Path) -> list[Row]:
             Row(bench.key, bench.key, bench.command, "not run", "", goal=goal, verdict="not run")
         ]
     try:
-        figures = bench.read(json.loads(path.read_text()))
-    except (KeyError, TypeError, ValueError, IndexError, ZeroDivisionError) as error:
+        figures = bench.read(read_record(bench.record, path))
+    except ValidationError as error:
+        first = error.errors()[0]
+        where = ".".join(str(part) for part in first["loc"]) or "the file"
+        why = (
+            f"unreadable: not a {bench.record.__name__} ({error.error_count()} errors; "
+            f"{where}: {first['msg']})"
+        )
+        return [
+            Row(
+                bench.key, bench.key, bench.command, "unreadable", path.name, goal=goal, verdict=why
+            )
+        ]
+    except (KeyError, ZeroDivisionError) as error:  # a record without the figure a goal reads
         why = f"unreadable: {type(error).__name__} {error}"
         return [
             Row(
@@ -261,7 +311,7 @@ def table(rows: Sequence[Row]) -> str:
     return "\n".join([text[0], rule, *text[1:]])
 
 
-def readme_figure(bench: Bench, rows: Sequence[Row]) -> str:
+def readme_figure(bench: Bench[Any], rows: Sequence[Row]) -> str:
     """A benchmark's figure cell in the README: each figure, its peer, its goal and verdict
     (one line each), then where its figures are explained."""
     parts = []

@@ -5,7 +5,25 @@ goals they are judged against (`bench.summary` prints them as one table).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TypeVar
+
+from bench.records import (
+    LIVE_ONLY,
+    AppendResult,
+    AsOfResult,
+    BlobsResult,
+    DecideResult,
+    FixtureStepResult,
+    MemoryResult,
+    PlanResult,
+    RawResult,
+    RenderResult,
+    RolloutBenchResult,
+    ServiceResult,
+    VersusResult,
+)
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -90,11 +108,11 @@ class Figure:
     met: bool | None = None
 
 
-# --- the readers: one per result file, keys as each benchmark writes them -----------------
+# --- the readers: one per result file, each reading the record its benchmark writes -------
 
 
-def read_render(data: dict[str, Any]) -> list[Figure]:
-    one, every = data["one_thread"]["fps"], data["all_threads"]["fps"]
+def read_render(data: RenderResult) -> list[Figure]:
+    one, every = data.one_thread.fps, data.all_threads.fps
     return [
         Figure(
             "render + detect, 640x480",
@@ -105,29 +123,28 @@ def read_render(data: dict[str, Any]) -> list[Figure]:
     ]
 
 
-def read_decide(data: dict[str, Any]) -> list[Figure]:
-    conditions = data["conditions"]
-    live = conditions["500 live tracks"]
-    base = live["decide_evolve_median_ms"]
+def read_decide(data: DecideResult) -> list[Figure]:
+    live = data.conditions[LIVE_ONLY]
+    base = live.decide_evolve_median_ms
     figures = [
         Figure(
             "decide + evolve, 20 masks, 500 live tracks",
-            f"median {number(base)} ms, p90 {number(live['decide_evolve_p90_ms'])} ms "
-            f"(decide {number(live['decide_median_ms'])}, "
-            f"evolve {number(live['evolve_median_ms'])})",
+            f"median {number(base)} ms, p90 {number(live.decide_evolve_p90_ms)} ms "
+            f"(decide {number(live.decide_median_ms)}, "
+            f"evolve {number(live.evolve_median_ms)})",
             goal="decide",
             value=base,
         )
     ]
-    others = {name: row for name, row in conditions.items() if name != "500 live tracks"}
+    others = {name: row for name, row in data.conditions.items() if name != LIVE_ONLY}
     if others:
-        worst = max(row["ratio_to_live_only"] for row in others.values())
+        worst = max(row.ratio_to_live_only for row in others.values())
         figures.append(
             Figure(
                 "decide + evolve with retired or stale hypotheses in memory",
                 ", ".join(
-                    f"{name}: {number(row['decide_evolve_median_ms'])} ms "
-                    f"({row['ratio_to_live_only']:.2f}x)"
+                    f"{name}: {number(row.decide_evolve_median_ms)} ms "
+                    f"({row.ratio_to_live_only:.2f}x)"
                     for name, row in others.items()
                 ),
                 peer=f"500 live tracks alone: {number(base)} ms",
@@ -138,22 +155,22 @@ def read_decide(data: dict[str, Any]) -> list[Figure]:
     return figures
 
 
-def read_fixture_step(data: dict[str, Any]) -> list[Figure]:
+def read_fixture_step(data: FixtureStepResult) -> list[Figure]:
     figures = []
     for name, goal in (("house", "fixture_step"), ("suite", None)):
-        row = data["conditions"].get(name)
+        row = data.conditions.get(name)
         if row is None:
             continue
-        kept, full, cpu = row["incremental"], row["full"], row["incremental_cpu"]
-        low, high = row["voxels"]
+        kept, cpu = row.incremental, row.incremental_cpu
+        low, high = row.voxels
         figure = Figure(
             f"fixture step per batch, {name} ({number(low)}-{number(high)} voxels)",
-            f"median {kept['median_ms']:.1f} ms, p90 {kept['p90_ms']:.1f}, max "
-            f"{kept['max_ms']:.1f} (CPU median {cpu['median_ms']:.1f})",
-            peer=f"full re-clustering {number(full['median_ms'])} ms "
-            f"({row['median_ratio_full_to_incremental']:.1f}x)",
+            f"median {kept.median_ms:.1f} ms, p90 {kept.p90_ms:.1f}, max "
+            f"{kept.max_ms:.1f} (CPU median {cpu.median_ms:.1f})",
+            peer=f"full re-clustering {number(row.full.median_ms)} ms "
+            f"({row.median_ratio_full_to_incremental:.1f}x)",
             goal=goal,
-            value=kept["median_ms"],
+            value=kept.median_ms,
         )
         if goal and low < FIXTURE_VOXELS:
             figure.verdict = f"not judged: {number(low)} voxels, the goal is at 100k"
@@ -161,41 +178,40 @@ def read_fixture_step(data: dict[str, Any]) -> list[Figure]:
     return figures
 
 
-def read_plan(data: dict[str, Any]) -> list[Figure]:
-    evidence = data["evidence"]
+def read_plan(data: PlanResult) -> list[Figure]:
+    evidence = data.evidence
     return [
         Figure(
             "planner decision, 20 m x 20 m at 5 cm",
-            f"median {number(data['ms_per_decision_median'])} ms, p90 "
-            f"{number(data['ms_per_decision_p90'])}, max {number(data['ms_per_decision_max'])}; "
-            f"occupancy evidence {evidence['bytes_per_batch_median'] / 1000:.1f} KB per frame, "
-            f"{number(evidence['evidence_ms_per_frame_median'])} ms "
-            f"({number(evidence['evidence_ms_per_frame_median_raw_depth'])} without the depth "
+            f"median {number(data.ms_per_decision_median)} ms, p90 "
+            f"{number(data.ms_per_decision_p90)}, max {number(data.ms_per_decision_max)}; "
+            f"occupancy evidence {evidence.bytes_per_batch_median / 1000:.1f} KB per frame, "
+            f"{number(evidence.evidence_ms_per_frame_median)} ms "
+            f"({number(evidence.evidence_ms_per_frame_median_raw_depth)} without the depth "
             "median)",
             goal="plan",
-            value=data["ms_per_decision_median"],
+            value=data.ms_per_decision_median,
         )
     ]
 
 
-def read_rollout(data: dict[str, Any]) -> list[Figure]:
+def read_rollout(data: RolloutBenchResult) -> list[Figure]:
     return [
         Figure(
-            f"autonomous rollout, {data['scenario']} ({number(data['area_m2'])} m², "
-            f"seed {data['seed']})",
-            f"{number(data['rollout_s'])} s: {data['keyframes']} keyframes, "
-            f"{data['inspections']} inspections, {number(data['path_m'])} m "
-            f"({data['stop_reason']})",
+            f"autonomous rollout, {data.scenario} ({number(data.area_m2)} m², seed {data.seed})",
+            f"{number(data.rollout_s)} s: {data.keyframes} keyframes, "
+            f"{data.inspections} inspections, {number(data.path_m)} m "
+            f"({data.stop_reason})",
             goal="rollout",
-            value=data["rollout_s"],
+            value=data.rollout_s,
         ),
         Figure(
             "planner per decision during the rollout",
-            f"median {number(data['planner_ms_median'])} ms, p90 "
-            f"{number(data['planner_ms_p90'])}, max {number(data['planner_ms_max'])} over "
-            f"{data['decisions']} decisions",
+            f"median {number(data.planner_ms_median)} ms, p90 "
+            f"{number(data.planner_ms_p90)}, max {number(data.planner_ms_max)} over "
+            f"{data.decisions} decisions",
             goal="rollout_planner",
-            value=data["planner_ms_median"],
+            value=data.planner_ms_median,
         ),
     ]
 
@@ -203,97 +219,96 @@ def read_rollout(data: dict[str, Any]) -> list[Figure]:
 BACKENDS = {"sqlite": "SQLite", "postgres": "PostgreSQL"}
 
 
-def read_append(data: dict[str, Any]) -> list[Figure]:
+def per_backend(sqlite: T | None, postgres: T | None) -> list[tuple[str, T]]:
+    """The backends that were run, with their figures, SQLite first."""
+    return [(name, row) for name, row in (("sqlite", sqlite), ("postgres", postgres)) if row]
+
+
+def read_append(data: AppendResult) -> list[Figure]:
     return [
         Figure(
-            f"append, {BACKENDS[name]}, batches of {data['batch']}",
-            f"{number(data[name]['events_per_s'])} events/s",
+            f"append, {BACKENDS[name]}, batches of {data.batch}",
+            f"{number(row.events_per_s)} events/s",
             goal="append",
-            value=data[name]["events_per_s"],
+            value=row.events_per_s,
         )
-        for name in BACKENDS
-        if name in data
+        for name, row in per_backend(data.sqlite, data.postgres)
     ]
 
 
-def read_as_of(data: dict[str, Any]) -> list[Figure]:
+def read_as_of(data: AsOfResult) -> list[Figure]:
     figures = []
-    for name in (name for name in BACKENDS if name in data):
-        row = data[name]
+    for name, row in per_backend(data.sqlite, data.postgres):
         figure = Figure(
-            f"as_of, {BACKENDS[name]}, {number(row['head_seq'])} events",
-            f"median {number(row['as_of_median_ms'])} ms, p90 {number(row['as_of_p90_ms'])}; "
-            f"snapshots {number(row['snapshot_bytes'] / row['head_seq'])} bytes per event",
-            peer=f"full replay {number(row['full_replay_ms'] / 1000)} s "
-            f"({number(row['speedup'])}x)",
+            f"as_of, {BACKENDS[name]}, {number(row.head_seq)} events",
+            f"median {number(row.as_of_median_ms)} ms, p90 {number(row.as_of_p90_ms)}; "
+            f"snapshots {number(row.snapshot_bytes / row.head_seq)} bytes per event",
+            peer=f"full replay {number(row.full_replay_ms / 1000)} s ({number(row.speedup)}x)",
             goal="as_of",
-            value=row["as_of_median_ms"],
+            value=row.as_of_median_ms,
         )
-        if data["events"] < AS_OF_EVENTS:
-            figure.verdict = f"not judged: {number(data['events'])} events, the goal is at 1M"
+        if data.events < AS_OF_EVENTS:
+            figure.verdict = f"not judged: {number(data.events)} events, the goal is at 1M"
         figures.append(figure)
     return figures
 
 
-def read_versus(data: dict[str, Any]) -> list[Figure]:
+def read_versus(data: VersusResult) -> list[Figure]:
     figures = []
-    for name in (name for name in BACKENDS if name in data):
-        for batch, row in data[name].items():
+    for name, rows in per_backend(data.sqlite, data.postgres):
+        for batch, row in rows.items():
             figures.append(
                 Figure(
-                    f"append vs {data['peer']}, {BACKENDS[name]}, batches of {batch}",
-                    f"ours {number(row['ours_events_per_s'])} events/s: {row['ratio']:.2f} "
-                    f"(per track {row['ratio_per_track']:.2f})",
-                    peer=f"{number(row['eventsourcing_events_per_s'])}/s one aggregate, "
-                    f"{number(row['eventsourcing_per_track_events_per_s'])}/s one per track",
+                    f"append vs {data.peer}, {BACKENDS[name]}, batches of {batch}",
+                    f"ours {number(row.ours_events_per_s)} events/s: {row.ratio:.2f} "
+                    f"(per track {row.ratio_per_track:.2f})",
+                    peer=f"{number(row.eventsourcing_events_per_s)}/s one aggregate, "
+                    f"{number(row.eventsourcing_per_track_events_per_s)}/s one per track",
                     goal="versus",
-                    value=row["ratio"],
+                    value=row.ratio,
                 )
             )
     return figures
 
 
-def read_raw(data: dict[str, Any]) -> list[Figure]:
-    compact = data["compact_bytes_per_frame"] / 1e6
+def read_raw(data: RawResult) -> list[Figure]:
+    compact = data.compact_bytes_per_frame / 1e6
     return [
         Figure(
             "raw batch kept per 640x480 frame",
-            f"{compact:.3f} MB compact (max {data['compact_max_bytes_per_frame'] / 1e6:.3f}); "
-            f"{data['compact_raw_bytes_per_event'] / 1000:.1f} kB per event; encode "
-            f"{number(data['encode_ms_median'])} ms, decode {number(data['decode_ms_median'])} ms",
-            peer=f"JSON with base64 depth {data['json_base64_bytes_per_frame'] / 1e6:.3f} MB "
-            f"(x{data['ratio']:.2f})",
+            f"{compact:.3f} MB compact (max {data.compact_max_bytes_per_frame / 1e6:.3f}); "
+            f"{data.compact_raw_bytes_per_event / 1000:.1f} kB per event; encode "
+            f"{number(data.encode_ms_median)} ms, decode {number(data.decode_ms_median)} ms",
+            peer=f"JSON with base64 depth {data.json_base64_bytes_per_frame / 1e6:.3f} MB "
+            f"(x{data.ratio:.2f})",
             goal="raw",
             value=round(compact, 3),
         )
     ]
 
 
-def read_blobs(data: dict[str, Any]) -> list[Figure]:
+def read_blobs(data: BlobsResult) -> list[Figure]:
     figures = []
-    for body, row in data["bodies"].items():
-        table, folder = row["backends"]["postgres+table"], row["backends"]["postgres+folder"]
+    for body, row in data.bodies.items():
+        table, folder = row.backends["postgres+table"], row.backends["postgres+folder"]
         figures.append(
             Figure(
-                f"raw batch storage, PostgreSQL table, {body} "
-                f"({row['mean_blob_bytes'] / 1e6:.2f} MB)",
-                f"put + enqueue {number(table['put_enqueue_ms_median'])} ms, "
-                f"get {table['get_ms_median']:.2f} ms",
-                peer=f"folder {number(folder['put_enqueue_ms_median'])} / "
-                f"{folder['get_ms_median']:.2f} ms (table/folder "
-                f"{table['put_enqueue_vs_folder']:.2f} / {table['get_vs_folder']:.1f})",
+                f"raw batch storage, PostgreSQL table, {body} ({row.mean_blob_bytes / 1e6:.2f} MB)",
+                f"put + enqueue {number(table.put_enqueue_ms_median)} ms, "
+                f"get {table.get_ms_median:.2f} ms",
+                peer=f"folder {number(folder.put_enqueue_ms_median)} / "
+                f"{folder.get_ms_median:.2f} ms (table/folder "
+                f"{table.put_enqueue_vs_folder:.2f} / {table.get_vs_folder:.1f})",
             )
         )
     return figures
 
 
-def read_memory(data: dict[str, Any]) -> list[Figure]:
-    cases = data["cases"]
-    worst = max(
-        cases, key=lambda name: max(cases[name]["api_peak_mb"], cases[name]["worker_peak_mb"])
-    )
-    api = max(case["api_peak_mb"] for case in cases.values())
-    worker = max(case["worker_peak_mb"] for case in cases.values())
+def read_memory(data: MemoryResult) -> list[Figure]:
+    cases = data.cases
+    worst = max(cases, key=lambda name: max(cases[name].api_peak_mb, cases[name].worker_peak_mb))
+    api = max(case.api_peak_mb for case in cases.values())
+    worker = max(case.worker_peak_mb for case in cases.values())
     return [
         Figure(
             "peak memory of the largest accepted batches",
@@ -305,77 +320,62 @@ def read_memory(data: dict[str, Any]) -> list[Figure]:
     ]
 
 
-def read_service(data: dict[str, Any]) -> list[Figure]:
-    configs, goals = data["configs"], data["goals"]
-    figures = []
-    at_rate = goals.get("one_worker_at_rate")
-    ramp = goals.get("one_worker_sustains_per_s")
+def read_service(data: ServiceResult) -> list[Figure]:
+    return [one_worker_figure(data), two_workers_figure(data)]
+
+
+def one_worker_figure(data: ServiceResult) -> Figure:
+    """One worker on one scene at the goal's rate, and the highest rate of the ramp it kept up
+    with."""
+    label = "service end to end, one worker, one scene"
+    at_rate, ramp = data.goals.one_worker_at_rate, data.goals.one_worker_sustains_per_s
     if at_rate is None:
-        figures.append(
-            Figure(
-                "service end to end, one worker, one scene",
-                "not measured in this run",
-                goal="service_one_worker",
-            )
+        return Figure(label, "not measured in this run", goal="service_one_worker")
+    one = data.configs[at_rate.config]
+    text = (
+        f"({at_rate.config}) at {at_rate.rate:g}/s: {number(one.throughput)} "
+        f"done/s, p99 {number(one.done_p99_ms)} ms"
+    )
+    sustained = ramp.highest_sustained if ramp else None
+    if ramp:
+        text += (
+            "; sustains none of " + ", ".join(f"{r:g}" for r in ramp.rates_tried) + "/s"
+            if sustained is None
+            else f"; sustains {sustained:g}/s, p99 {number(ramp.done_p99_ms or 0.0)} ms"
         )
+    if at_rate.met:
+        verdict = "met"
     else:
-        one = configs[at_rate["config"]]
-        text = (
-            f"({at_rate['config']}) at {at_rate['rate']:g}/s: {number(one['throughput'])} "
-            f"done/s, p99 {number(one['done_p99_ms'])} ms"
-        )
-        sustained = ramp["highest_sustained"] if ramp else None
-        if ramp:
-            text += (
-                "; sustains none of " + ", ".join(f"{r:g}" for r in ramp["rates_tried"]) + "/s"
-                if sustained is None
-                else f"; sustains {sustained:g}/s, p99 {number(ramp['done_p99_ms'])} ms"
-            )
-        if at_rate["met"]:
-            verdict = "met"
-        else:
-            # The highest rate of the ramp it kept up with, else what it did at the goal's rate.
-            kept = sustained if sustained is not None else one["throughput"]
-            shown = f"{sustained:g}" if sustained is not None else number(kept)
-            goal = GOALS["service_one_worker"]
-            verdict = f"missed: {shown}/s ({(goal.bound - kept) / goal.bound:.0%} short)"
-            if at_rate["done_p99_ms"] >= GOALS["service_p99"].bound:
-                verdict += f", p99 {number(at_rate['done_p99_ms'])} ms at {at_rate['rate']:g}/s"
-        figures.append(
-            Figure(
-                "service end to end, one worker, one scene",
-                text,
-                goal="service_one_worker",
-                verdict=verdict,
-                met=bool(at_rate["met"]),
-            )
-        )
-    scaling = goals.get("two_workers_scaling")
+        # The highest rate of the ramp it kept up with, else what it did at the goal's rate.
+        kept = sustained if sustained is not None else one.throughput
+        shown = f"{sustained:g}" if sustained is not None else number(kept)
+        goal = GOALS["service_one_worker"]
+        verdict = f"missed: {shown}/s ({(goal.bound - kept) / goal.bound:.0%} short)"
+        if at_rate.done_p99_ms >= GOALS["service_p99"].bound:
+            verdict += f", p99 {number(at_rate.done_p99_ms)} ms at {at_rate.rate:g}/s"
+    return Figure(label, text, goal="service_one_worker", verdict=verdict, met=at_rate.met)
+
+
+def two_workers_figure(data: ServiceResult) -> Figure:
+    """Two workers on two scenes against one worker on two scenes, and the CPU bound."""
+    label = "service end to end, two workers on two scenes"
+    scaling, bound = data.goals.two_workers_scaling, data.goals.cpu_bound
     if scaling is None:
-        figures.append(
-            Figure(
-                "service end to end, two workers on two scenes",
-                "not measured in this run (needs --postgres)",
-                goal="service_two_workers",
-            )
+        return Figure(
+            label, "not measured in this run (needs --postgres)", goal="service_two_workers"
         )
-    else:
-        bound = goals.get("cpu_bound", {})
-        text = f"(c) {number(configs['c']['throughput'])} done/s: {scaling['ratio']:.2f}x"
-        if bound:
-            text += (
-                f"; the CPU bound allows {bound['two_worker_ratio_max']:.2f}x "
-                f"({number(bound['worker_cpu_ms_per_batch'])} ms of worker CPU and "
-                f"{number(bound['api_cpu_ms_per_batch'])} ms of API CPU per batch, "
-                f"{bound['cores']} cores)"
-            )
-        figures.append(
-            Figure(
-                "service end to end, two workers on two scenes",
-                text,
-                peer=f"(d) one worker, two scenes: {number(configs['d']['throughput'])} done/s",
-                goal="service_two_workers",
-                value=scaling["ratio"],
-            )
+    text = f"(c) {number(data.configs['c'].throughput)} done/s: {scaling.ratio:.2f}x"
+    if bound:
+        text += (
+            f"; the CPU bound allows {bound.two_worker_ratio_max:.2f}x "
+            f"({number(bound.worker_cpu_ms_per_batch)} ms of worker CPU and "
+            f"{number(bound.api_cpu_ms_per_batch)} ms of API CPU per batch, "
+            f"{bound.cores} cores)"
         )
-    return figures
+    return Figure(
+        label,
+        text,
+        peer=f"(d) one worker, two scenes: {number(data.configs['d'].throughput)} done/s",
+        goal="service_two_workers",
+        value=scaling.ratio,
+    )

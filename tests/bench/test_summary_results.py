@@ -18,6 +18,16 @@ import pytest
 
 from bench import perf_common
 from bench.perf_common import synthetic_events
+from bench.records import (
+    DecideCondition,
+    DecideResult,
+    EvidenceSizes,
+    Figures,
+    MemoryCase,
+    RenderRun,
+    SnapshotStorage,
+    to_json,
+)
 from bench.summary import BENCHES, END_MARKER, START_MARKER, Row, main, rewrite_readme, summary
 from tests.eval_extra import require_eval_extra
 
@@ -40,14 +50,11 @@ def results(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
 def write_render(mp: pytest.MonkeyPatch, results: Path) -> None:
     from bench import bench_render
 
-    def measure_fps(n_frames: int, nthreads: int) -> dict[str, float]:  # its keys
+    def measure_fps(n_frames: int, nthreads: int) -> RenderRun:
         fps = 34.0 if nthreads == 1 else 50.0
-        return {
-            "frames": n_frames,
-            "render_ms_per_frame": 20.0,
-            "detect_ms_per_frame": 9.0,
-            "fps": fps,
-        }
+        return RenderRun(
+            frames=n_frames, render_ms_per_frame=20.0, detect_ms_per_frame=9.0, fps=fps
+        )
 
     mp.setattr(bench_render, "RESULTS_PATH", results / "render.json")
     mp.setattr(bench_render, "measure_fps", measure_fps)
@@ -126,13 +133,13 @@ def write_plan(mp: pytest.MonkeyPatch) -> None:
         occupancy=SimpleNamespace(shape=(400, 400)),
         tracks=dict.fromkeys(range(12)),
     )
-    evidence = {  # evidence_sizes's keys
-        "frames": 24,
-        "bytes_per_batch_median": 1700.0,
-        "bytes_per_batch_max": 1900,
-        "evidence_ms_per_frame_median": 3.5,
-        "evidence_ms_per_frame_median_raw_depth": 2.9,
-    }
+    evidence = EvidenceSizes(
+        frames=24,
+        bytes_per_batch_median=1700.0,
+        bytes_per_batch_max=1900,
+        evidence_ms_per_frame_median=3.5,
+        evidence_ms_per_frame_median_raw_depth=2.9,
+    )
     mp.setattr(bench_plan, "planning_state", lambda seed: state)
     mp.setattr(bench_plan, "MapGeometry", SimpleNamespace(of=lambda params: None))
     mp.setattr(bench_plan, "robot_poses", lambda state, count, seed: list(range(count)))
@@ -225,7 +232,7 @@ def write_store(mp: pytest.MonkeyPatch) -> None:
     mp.setattr(
         bench_store,
         "snapshot_storage",
-        lambda engine: {"snapshots": 1_999, "snapshot_bytes": 1_322_000_000},
+        lambda engine: SnapshotStorage(snapshots=1_999, snapshot_bytes=1_322_000_000),
     )
     mp.setattr(bench_store, "version", lambda name: "9.5.6")
     mp.setattr(bench_store, "synthetic_events", lambda count: synthetic_events(40))
@@ -284,18 +291,18 @@ def write_blobs(mp: pytest.MonkeyPatch) -> None:
 def write_memory(mp: pytest.MonkeyPatch) -> None:
     from bench import bench_memory
 
-    def run_case(name: str, make: Any, root: Path) -> dict[str, Any]:  # run_case's keys
+    def run_case(name: str, make: Any, root: Path) -> MemoryCase:
         worker = 287.0 if name == "most fixture masks over noise depth" else 150.0
-        return {
-            "body_mb": 24.0,
-            "frames": 1,
-            "detections": 8,
-            "api_peak_mb": 120.0,
-            "worker_peak_mb": worker,
-            "accept_seconds": 1.0,
-            "work_seconds": 2.0,
-            "batch_status": "done",
-        }
+        return MemoryCase(
+            body_mb=24.0,
+            frames=1,
+            detections=8,
+            api_peak_mb=120.0,
+            worker_peak_mb=worker,
+            accept_seconds=1.0,
+            work_seconds=2.0,
+            batch_status="done",
+        )
 
     mp.setattr(bench_memory, "run_case", run_case)
     bench_memory.main([])
@@ -303,7 +310,6 @@ def write_memory(mp: pytest.MonkeyPatch) -> None:
 
 def write_service(mp: pytest.MonkeyPatch, argv: list[str] | None = None) -> None:
     from bench import bench_service
-    from bench.service_report import Figures
 
     done_per_s = {"a": 10.7, "b": 10.4, "c": 13.7, "d": 8.2}
 
@@ -463,9 +469,20 @@ def test_a_file_of_another_shape_is_unreadable_not_an_error(results: Path) -> No
     (results / "decide.json").write_text(json.dumps({"conditions": {"renamed": {}}}))
     (results / "memory.json").write_text("{not json")
     rows = {row.benchmark: row for row in summary(results)}
-    assert rows["decide"].status == "unreadable" and "500 live tracks" in rows["decide"].verdict
-    assert rows["memory"].status == "unreadable"
+    assert rows["decide"].status == "unreadable"
+    assert rows["decide"].verdict.startswith("unreadable: not a DecideResult (")
+    assert "masks: Field required" in rows["decide"].verdict and "\n" not in rows["decide"].verdict
+    assert rows["memory"].status == "unreadable" and "Invalid JSON" in rows["memory"].verdict
     assert rows["plan"].status == "not run"
+
+
+def test_a_record_without_the_figure_its_goal_reads_is_unreadable(results: Path) -> None:
+    row = DecideCondition(25, 20, 9.0, 2.0, 11.0, 12.0, 1.0)
+    renamed = DecideResult(20, (640, 480), 3, 10.0, 1.5, {"renamed": row})
+    results.mkdir()
+    (results / "decide.json").write_text(to_json(renamed))
+    (decide,) = [row for row in summary(results) if row.benchmark == "decide"]
+    assert decide.status == "unreadable" and "KeyError '500 live tracks'" in decide.verdict
 
 
 def test_the_newest_service_run_is_read(results: Path, monkeypatch: pytest.MonkeyPatch) -> None:
