@@ -14,6 +14,7 @@ from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+from core.events import TrackConfirmed, TrackEvent, TrackMoved, TrackRemoved, TrackReparented
 from evaluation.metrics import (
     matchable,
     present_objects,
@@ -25,11 +26,11 @@ from evaluation.predictions import FramePrediction, MethodEvent
 from sim.truth import FrameTruth, ScheduledEvent, Vec3
 
 # The method event that shows a scheduled change was noticed, per scheduled event type.
-RECALLING_EVENT_TYPE = {
-    "appear": "confirm",
-    "move": "move",
-    "disappear": "remove",
-    "transfer": "reparent",
+RECALLING_EVENT: dict[str, type[TrackEvent]] = {
+    "appear": TrackConfirmed,
+    "move": TrackMoved,
+    "disappear": TrackRemoved,
+    "transfer": TrackReparented,
 }
 PRESENCE_RADIUS_M = 0.5  # the paper's 0.5 m gate: a node this close stands for the object
 
@@ -90,8 +91,9 @@ def event_recall(
     """Scheduled changes answered by the right event of the object's track, and their latency.
 
     A change is reflected at the first frame f, event.frame <= f < n_frames, at which the
-    object's assigned track emits: appear -> "confirm"; move -> "move"; disappear -> "remove";
-    transfer -> "reparent" with details["new_parent"] equal to fixture_map[event.parent]. An
+    object's assigned track emits: appear -> TrackConfirmed; move -> TrackMoved; disappear ->
+    TrackRemoved; transfer -> TrackReparented with a new parent equal to
+    fixture_map[event.parent]. An
     object without an assigned track, or a transfer to an unmatched fixture, is never reflected.
     Its latency is batch(f) - batch(observable frame), floored at 0 (a memory may act on less
     evidence than the observability test asks for); without an observable frame it counts from
@@ -102,7 +104,7 @@ def event_recall(
     observable = list(observable_frames or [event.frame for event in scheduled])
     outcomes: list[EventOutcome] = []
     for event, seen_at in zip(scheduled, observable, strict=True):
-        if event.type not in RECALLING_EVENT_TYPE:
+        if event.type not in RECALLING_EVENT:
             raise ValueError(f"unknown scheduled event type {event.type!r}")
         track_id = assignment.get(event.object_id)
         wanted_parent = fixture_map.get(event.parent) if event.parent is not None else None
@@ -111,13 +113,10 @@ def event_recall(
             frames = [
                 method_event.frame
                 for method_event in method_events
-                if method_event.type == RECALLING_EVENT_TYPE[event.type]
+                if issubclass(method_event.kind, RECALLING_EVENT[event.type])
                 and method_event.track_id == track_id
                 and event.frame <= method_event.frame < n_frames
-                and (
-                    event.type != "transfer"
-                    or method_event.details.get("new_parent") == wanted_parent
-                )
+                and (event.type != "transfer" or method_event.new_parent == wanted_parent)
             ]
         recalled_frame = min(frames, default=None)
         latency = None

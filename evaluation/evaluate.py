@@ -8,13 +8,22 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from api_schema import BatchIn
 from codec.observations import decode_batch
 from core.decide import decide
-from core.events import Event, SceneCreated, TrackReparented
+from core.event_records import event_from_record
+from core.events import (
+    Event,
+    SceneCreated,
+    TrackConfirmed,
+    TrackEvent,
+    TrackMoved,
+    TrackRemoved,
+    TrackReparented,
+)
 from core.evolve import evolve, fold
 from core.graph import is_published
 from core.params import Params
@@ -57,22 +66,20 @@ def nodes_of(
 def graph_events(
     frame: int, before: Sequence[PredictedNode], after: Sequence[PredictedNode]
 ) -> list[MethodEvent]:
-    """Typed events of a method whose only output is its graph: diffs between two graphs."""
+    """Typed events of a method whose only output is its graph: diffs between two graphs, each
+    standing for the core event a published graph shows (a node published, unpublished, moved
+    by 0.35 m or more, given a new parent)."""
     old = {n.track_id: n for n in before}
     new = {n.track_id: n for n in after}
-    events = [MethodEvent(frame, "confirm", i, {}) for i in new if i not in old]
-    events += [MethodEvent(frame, "remove", i, {}) for i in old if i not in new]
+    events = [MethodEvent(frame, i, TrackConfirmed) for i in new if i not in old]
+    events += [MethodEvent(frame, i, TrackRemoved) for i in old if i not in new]
     for track_id in new.keys() & old.keys():
         a, b = old[track_id], new[track_id]
         if sum((x - y) ** 2 for x, y in zip(a.center, b.center, strict=True)) >= 0.35**2:
-            events.append(MethodEvent(frame, "move", track_id, {}))
+            events.append(MethodEvent(frame, track_id, TrackMoved))
         if b.parent is not None and b.parent != a.parent:
-            events.append(
-                MethodEvent(
-                    frame, "reparent", track_id, {"old_parent": a.parent, "new_parent": b.parent}
-                )
-            )
-    return sorted(events, key=lambda e: (e.type, e.track_id))
+            events.append(MethodEvent(frame, track_id, TrackReparented, new_parent=b.parent))
+    return sorted(events, key=lambda e: (e.kind.type, e.track_id))
 
 
 class Recorder:
@@ -98,15 +105,18 @@ class Recorder:
 
 
 def stamp(frame: int, events: Sequence[Event], prefix: str = "") -> list[MethodEvent]:
-    """Core events as method events at a frame (track ids prefixed per remap epoch)."""
+    """Core events about tracks as method events at a frame (track ids prefixed per remap
+    epoch, the parents of a reparent too)."""
     stamped = []
     for event in events:
-        if event.track_id is None:
+        if not isinstance(event, TrackEvent):
             continue
-        details = event.details()
-        if isinstance(event, TrackReparented):
-            details = {k: None if v is None else prefix + v for k, v in details.items()}
-        stamped.append(MethodEvent(frame, event.type, prefix + event.track_id, details))
+        if prefix:
+            event = replace(event, track_id=prefix + event.track_id)
+            if isinstance(event, TrackReparented):
+                old = None if event.old_parent is None else prefix + event.old_parent
+                event = replace(event, old_parent=old, new_parent=prefix + event.new_parent)
+        stamped.append(MethodEvent.of(frame, event))
     return stamped
 
 
@@ -175,11 +185,8 @@ def run_via_service(
         )
         events: list[MethodEvent] = []
         if status.first_seq is not None:
-            events = [
-                MethodEvent(last_frame, e.type, e.track_id, e.details)
-                for e in client.events(scene_id, after=status.first_seq - 1, up_to=status.last_seq)
-                if e.track_id is not None
-            ]
+            logged = client.events(scene_id, after=status.first_seq - 1, up_to=status.last_seq)
+            events = stamp(last_frame, [event_from_record(e.model_dump()) for e in logged])
         nodes = tuple(
             PredictedNode(n.id, n.label, (n.center[0], n.center[1], n.center[2]), n.parent, n.kind)
             for n in client.graph(scene_id).nodes

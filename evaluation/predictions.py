@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
+from core.events import TrackEvent, TrackReparented
 from sim.truth import Vec3
 
 
@@ -30,9 +29,18 @@ class FramePrediction:
 
 @dataclass(frozen=True)
 class MethodEvent:
-    """A typed event a method emitted (add, confirm, update, move, reparent, demote, remove)."""
+    """A change a method showed about one track while processing a frame: the class of the core
+    event it is (or, for a method whose only output is its graph, the one it stands for), the
+    new parent of a reparent, and the event itself when the method emitted one."""
 
     frame: int  # index of the frame being processed when the event was emitted
-    type: str
     track_id: str
-    details: Mapping[str, Any]
+    kind: type[TrackEvent]
+    new_parent: str | None = None
+    event: TrackEvent | None = None
+
+    @classmethod
+    def of(cls, frame: int, event: TrackEvent) -> MethodEvent:
+        """A core event as the method event it is."""
+        new_parent = event.new_parent if isinstance(event, TrackReparented) else None
+        return cls(frame, event.track_id, type(event), new_parent, event)

@@ -10,6 +10,7 @@ from typing import Any
 
 from tqdm import tqdm
 
+from core.events import TrackUpdated, VisibleMiss
 from evaluation.change_metrics import class_false_absence, event_recall, false_absence
 from evaluation.evaluate import MethodRun, WireBatch, run_in_process, run_via_service
 from evaluation.methods import Method
@@ -137,12 +138,10 @@ def _track_story(result: MethodRun, track_id: str | None, since: int, limit: int
     for event in result.events:
         if event.track_id != track_id or event.frame < since:
             continue
-        if event.type == "update":
-            if event.details.get("evidence") != "visible_miss":
-                continue
+        if issubclass(event.kind, VisibleMiss):
             story.append(f"{event.frame}:miss")
-        else:
-            story.append(f"{event.frame}:{event.type}")
+        elif not issubclass(event.kind, TrackUpdated):
+            story.append(f"{event.frame}:{event.kind.type}")
     return story[:limit]
 
 

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from core.events import TrackConfirmed
 from evaluation.evaluate import WireBatch, run_in_process, run_via_service
 from evaluation.methods import DYNAMIC_METHODS, MethodUnavailable, method_named
 from evaluation.protocols import FRAMES_PER_BATCH, acquired_truth
@@ -35,10 +36,10 @@ def test_in_process_and_via_service_give_the_same_events_and_graphs(
     container = build_container(Settings(data_dir=tmp_path, allow_anonymous_local=True))
     with local_pbdag_client(create_app(container, run_worker=True)) as client:
         remote = run_via_service(pbdag, batches, client)
-    key = [(e.frame, e.type, e.track_id, dict(e.details)) for e in local.events]
-    assert key and key == [(e.frame, e.type, e.track_id, dict(e.details)) for e in remote.events]
+    assert local.events and local.events == remote.events  # the typed events themselves
+    assert all(e.event is not None and e.kind is type(e.event) for e in remote.events)
     assert local.predictions == remote.predictions
-    assert any(e.type == "confirm" for e in local.events)
+    assert any(e.kind is TrackConfirmed for e in local.events)
 
 
 def test_every_available_method_runs_and_the_truth_starts_at_first_detection(

@@ -6,6 +6,7 @@ import math
 
 import pytest
 
+from core.events import ObjectAdded, TrackConfirmed, TrackMoved, TrackRemoved, TrackReparented
 from evaluation.change_metrics import (
     class_false_absence,
     event_recall,
@@ -208,16 +209,16 @@ def test_event_recall_per_event_type() -> None:
         ScheduledEvent(3, "disappear", "vase"),  # vase has no track: never
     ]
     method_events = [
-        MethodEvent(1, "add", "t4", {}),
-        MethodEvent(2, "add", "t1", {}),
-        MethodEvent(3, "confirm", "t1", {}),
-        MethodEvent(3, "move", "t2", {}),
-        MethodEvent(5, "move", "t1", {}),
-        MethodEvent(5, "remove", "t3", {}),
-        MethodEvent(7, "reparent", "t2", {"new_parent": "F1"}),
-        MethodEvent(7, "reparent", "t4", {"new_parent": None}),
-        MethodEvent(8, "reparent", "t1", {"new_parent": "F2"}),
-        MethodEvent(10, "confirm", "t4", {}),
+        MethodEvent(1, "t4", ObjectAdded),
+        MethodEvent(2, "t1", ObjectAdded),
+        MethodEvent(3, "t1", TrackConfirmed),
+        MethodEvent(3, "t2", TrackMoved),
+        MethodEvent(5, "t1", TrackMoved),
+        MethodEvent(5, "t3", TrackRemoved),
+        MethodEvent(7, "t2", TrackReparented, new_parent="F1"),
+        MethodEvent(7, "t4", TrackReparented),
+        MethodEvent(8, "t1", TrackReparented, new_parent="F2"),
+        MethodEvent(10, "t4", TrackConfirmed),
     ]
     result = event_recall(scheduled, method_events, assignment, fixture_map, n_frames=10)
     assert [outcome.recalled for outcome in result.per_event] == [
@@ -249,10 +250,10 @@ def test_event_latency_counts_batches_from_the_first_observable_frame() -> None:
         ScheduledEvent(6, "transfer", "cup", parent="table"),
     ]
     method_events = [
-        MethodEvent(9, "confirm", "t1", {}),
-        MethodEvent(30, "remove", "t2", {}),
-        MethodEvent(5, "move", "t3", {}),
-        MethodEvent(12, "move", "t3", {}),
+        MethodEvent(9, "t1", TrackConfirmed),
+        MethodEvent(30, "t2", TrackRemoved),
+        MethodEvent(5, "t3", TrackMoved),
+        MethodEvent(12, "t3", TrackMoved),
     ]
     result = event_recall(
         scheduled,
