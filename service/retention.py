@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 from core.graph import pending_verifications
 from core.planner import unresolved_fixtures
-from pbdag_errors import PbdagError
+from pbdag_errors import Refused
 from service.bootstrap import Container
 from service.store.queue_records import BatchRecord
 
@@ -89,7 +89,7 @@ def collect(
         if record.scene_id not in referenced:
             try:
                 referenced[record.scene_id] = referenced_batches(container, record.scene_id)
-            except PbdagError as error:
+            except Refused as error:  # the store failing is no unreadable scene: gc stops
                 referenced[record.scene_id] = None
                 report.unreadable_scenes[record.scene_id] = error.detail
         held = referenced[record.scene_id]

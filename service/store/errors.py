@@ -21,8 +21,10 @@ class StoreUnavailable(StoreError):
     a disk error): the same request may succeed later."""
 
     def __init__(self, what: str, cause: BaseException) -> None:
-        super().__init__(f"{what} failed ({type(cause).__name__})")
-        self.cause_name = type(cause).__name__  # the driver's class, for short messages
+        driver = getattr(cause, "orig", None) or cause  # SQLAlchemy's wraps the driver's
+        reason = (str(driver).strip().splitlines() or [""])[0][:200]  # never its SQL
+        super().__init__(f"{what} failed ({type(cause).__name__}: {reason})")
+        self.cause_name = type(cause).__name__  # for the short message a batch keeps
 
 
 class LeaseLost(StoreError):
