@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 import sqlalchemy as sa
 
+from core.errors import StateConflict
 from core.events import Event, VisibleMiss
 from core.params import Params
 from core.state import SceneState
@@ -433,6 +434,33 @@ def test_a_command_is_decided_again_when_the_head_moved(container: Container) ->
 
     events, appended = run_command(container, scene.id, decide_command)
     assert calls == [0, 1] and appended.seqs == (2, 2) and events[0].type == "update"
+
+
+def test_a_head_that_keeps_moving_is_a_conflict_and_a_refused_command_writes_nothing(
+    container: Container,
+) -> None:
+    scene = new_scene(container)
+    calls: list[int] = []
+
+    def always_overtaken(state: SceneState) -> list[Event]:
+        calls.append(state.head_seq)
+        append_batch(container, scene.id, [added(f"trk-{len(calls):06d}")])
+        return [added("trk-999999")]
+
+    with pytest.raises(ConcurrencyConflict) as moving:
+        run_command(container, scene.id, always_overtaken)
+    assert calls == [0, 1, 2, 3, 4]  # decided on each new head, ATTEMPTS times
+    assert (moving.value.detail, moving.value.field) == (
+        f"scene {scene.id!r} kept changing; try again",
+        "scene_id",
+    )
+
+    def refused(state: SceneState) -> list[Event]:
+        raise StateConflict("the fixture is not confirmed")
+
+    with pytest.raises(StateConflict):
+        run_command(container, scene.id, refused)
+    assert container.log.scene(scene.id).head_seq == 5  # the five appends of the other writer
 
 
 def newest_revision() -> str:

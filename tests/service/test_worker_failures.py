@@ -187,6 +187,34 @@ def test_the_lease_is_renewed_while_a_slow_batch_runs(
     assert stolen == 0 and (done["status"], done["attempts"]) == ("done", 1)
 
 
+def test_a_dead_batch_lands_its_gap_on_the_head_a_command_moved_meanwhile(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The worker records `batch_skipped` through the same retry loop as the commands: an
+    append between its read of the head and its write is not lost, the gap comes after it."""
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0")
+    claim = container.queue.claim("w", 30.0)
+    assert claim is not None
+    real_load, loads = container.log.load_state, 0
+
+    def load_then_a_command_appends(scene: str, *args: Any, **kwargs: Any) -> SceneState:
+        nonlocal loads
+        state = real_load(scene, *args, **kwargs)
+        loads += 1
+        if loads == 1:
+            with container.uow.begin() as work:
+                work.append(scene, state, [an_add(0.1)])
+        return state
+
+    monkeypatch.setattr(container.log, "load_state", load_then_a_command_appends)
+    Worker(container).skip(claim, "rejected: for the test")
+    monkeypatch.undo()
+    types = [e["type"] for e in client.get(f"/v1/scenes/{scene_id}/events").json()["events"]]
+    assert loads == 2 and types == ["scene_created", "add", "batch_skipped"]
+    assert status(client, scene_id, "b0")["status"] == "dead"
+
+
 def test_an_unreadable_event_is_a_409_and_repair_rebuilds_the_scene(
     client: TestClient, container: Container
 ) -> None:
