@@ -85,6 +85,41 @@ def summary(samples: list[float]) -> Timings:
     )
 
 
+def timed_condition(sizes: list[int], by_path: dict[str, list[float]]) -> FixtureStepCondition:
+    """One condition's timings: per path, wall and CPU, the fold, and full against incremental."""
+    kept, anew = summary(by_path["incremental"]), summary(by_path["full"])
+    ratios = [f / i for f, i in zip(by_path["full"], by_path["incremental"], strict=True)]
+    cpu = summary(by_path["incremental_cpu"])
+    return FixtureStepCondition(
+        voxels=(min(sizes), max(sizes)),
+        incremental=kept,
+        full=anew,
+        incremental_cpu=cpu,
+        full_cpu=summary(by_path["full_cpu"]),
+        fold_of_the_batch=summary(by_path["fold"]),
+        median_ratio_full_to_incremental=statistics.median(ratios),
+        goal_met_wall=kept.median_ms <= GOAL_MS,
+        goal_met_cpu=cpu.median_ms <= GOAL_MS,
+    )
+
+
+def print_condition(name: str, row: FixtureStepCondition) -> None:
+    kept, kept_cpu, anew, anew_cpu = row.incremental, row.incremental_cpu, row.full, row.full_cpu
+    low, high = row.voxels
+    print(
+        f"{name:>5} ({low:,}-{high:,} voxels), ms per batch, median / p90 / max:\n"
+        f"       incremental wall {kept.median_ms:6.2f} / {kept.p90_ms:6.2f} / "
+        f"{kept.max_ms:6.2f}, CPU {kept_cpu.median_ms:6.2f} / {kept_cpu.p90_ms:6.2f}"
+        f" / {kept_cpu.max_ms:6.2f}\n"
+        f"       full        wall {anew.median_ms:6.1f} / {anew.p90_ms:6.1f} / "
+        f"{anew.max_ms:6.1f}, CPU {anew_cpu.median_ms:6.1f} / {anew_cpu.p90_ms:6.1f}"
+        f" / {anew_cpu.max_ms:6.1f}\n"
+        f"       full / incremental {row.median_ratio_full_to_incremental:5.1f}x (median per "
+        f"batch); the fold of the batch's events {row.fold_of_the_batch.median_ms:5.2f} ms; "
+        f"goal <= {GOAL_MS:.0f} ms per batch at 100k voxels"
+    )
+
+
 def main(argv: list[str] | None = None) -> None:
     """Fixture step per batch, incremental against full, at ~11k and ~100k voxels; writes
     bench/results/fixture_step.json."""
@@ -129,37 +164,9 @@ def main(argv: list[str] | None = None) -> None:
                 samples[name][f"{path}_cpu"].append(min(cpu for _wall, cpu in timings))
             conditions[name], fold_time = fold_ms(condition, batch)
             samples[name]["fold"].append(fold_time)
-    timed: dict[str, FixtureStepCondition] = {}
-    for name, by_path in samples.items():
-        kept, anew = summary(by_path["incremental"]), summary(by_path["full"])
-        kept_cpu, anew_cpu = summary(by_path["incremental_cpu"]), summary(by_path["full_cpu"])
-        ratios = [f / i for f, i in zip(by_path["full"], by_path["incremental"], strict=True)]
-        ratio = statistics.median(ratios)
-        folded = summary(by_path["fold"])
-        timed[name] = FixtureStepCondition(
-            voxels=(min(sizes[name]), max(sizes[name])),
-            incremental=kept,
-            full=anew,
-            incremental_cpu=kept_cpu,
-            full_cpu=anew_cpu,
-            fold_of_the_batch=folded,
-            median_ratio_full_to_incremental=ratio,
-            goal_met_wall=kept.median_ms <= GOAL_MS,
-            goal_met_cpu=kept_cpu.median_ms <= GOAL_MS,
-        )
-        print(
-            f"{name:>5} ({min(sizes[name]):,}-{max(sizes[name]):,} voxels), ms per batch, "
-            f"median / p90 / max:\n"
-            f"       incremental wall {kept.median_ms:6.2f} / {kept.p90_ms:6.2f} / "
-            f"{kept.max_ms:6.2f}, CPU {kept_cpu.median_ms:6.2f} / {kept_cpu.p90_ms:6.2f}"
-            f" / {kept_cpu.max_ms:6.2f}\n"
-            f"       full        wall {anew.median_ms:6.1f} / {anew.p90_ms:6.1f} / "
-            f"{anew.max_ms:6.1f}, CPU {anew_cpu.median_ms:6.1f} / {anew_cpu.p90_ms:6.1f}"
-            f" / {anew_cpu.max_ms:6.1f}\n"
-            f"       full / incremental {ratio:5.1f}x (median per batch); the fold of the "
-            f"batch's events {folded.median_ms:5.2f} ms; goal <= {GOAL_MS:.0f} ms per batch "
-            f"at 100k voxels"
-        )
+    timed = {name: timed_condition(sizes[name], by_path) for name, by_path in samples.items()}
+    for name, row in timed.items():
+        print_condition(name, row)
     results = FixtureStepResult(
         scenario="hotel-suite",
         house_copies=copies,

@@ -50,6 +50,16 @@ from bench.service_fleet import Fleet, free_port, machine_busy_seconds, postgres
 from bench.service_load import BodyTemplate, render_templates, stage_breakdown
 from bench.service_report import GOAL_RATE, percentile, table, verdicts
 
+CLOCK = (
+    "latency to done: the batch's finished_at minus its scheduled send time (time.time()), one "
+    "machine's wall clock; send_lag_p99_ms is how late sends started"
+)
+SERVICE_SETTINGS = {  # what the fleet sets beyond the defaults, as the result file records it
+    "PBDAG_ALLOW_ANONYMOUS_LOCAL": "true",
+    "PBDAG_RATE_LIMIT_PER_MINUTE": "0",
+    "PBDAG_MAX_QUEUED_BATCHES_PER_SCENE": "1000000",
+    "PBDAG_LOG_LEVEL": "WARNING",
+}
 POSTING_THREADS = 128  # concurrent POSTs; beyond, a send waits (its lag is reported)
 
 
@@ -179,6 +189,11 @@ def run_config(
             scrape(metrics) for name, metrics in fleet.metrics_urls.items() if name != "api"
         ] or [scrape(f"{url}/metrics")]
         collect(http, sends, figures, worker_metrics)
+    print(
+        f"  done {figures.done}/{figures.batches}, {figures.throughput:.1f}/s, "
+        f"done p99 {figures.done_p99_ms:.0f} ms",
+        file=sys.stderr,
+    )
     return figures
 
 
@@ -309,7 +324,8 @@ def interrupted(signum: int, _frame: object) -> None:
     raise KeyboardInterrupt(f"signal {signum}")
 
 
-def main(argv: list[str] | None = None) -> None:
+def arguments(argv: list[str] | None) -> argparse.Namespace:
+    """The command line."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--rate", type=float, default=30.0, help="batches per second per scene")
     parser.add_argument("--seconds", type=float, default=20.0, help="load per configuration")
@@ -329,7 +345,11 @@ def main(argv: list[str] | None = None) -> None:
     )
     parser.add_argument("--views", type=int, default=24, help="distinct rendered views cycled")
     parser.add_argument("--name", default=None, help="result file name (default service-<time>)")
-    args = parser.parse_args(argv)
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> None:
+    args = arguments(argv)
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGTERM, interrupted)  # stop the processes, drop the schema
     seconds = 3.0 if args.quick else args.seconds
@@ -361,11 +381,6 @@ def main(argv: list[str] | None = None) -> None:
             postgres_url=args.postgres,
             drain_timeout=max(60.0, 10 * seconds),
         )
-        f = rows[config.key]
-        print(
-            f"  done {f.done}/{f.batches}, {f.throughput:.1f}/s, done p99 {f.done_p99_ms:.0f} ms",
-            file=sys.stderr,
-        )
     ramp = [float(r) for r in args.ramp.split(",")] if args.ramp else []
     base = next((c for c in CONFIGS if c.key == ("b" if args.postgres else "a")), CONFIGS[0])
     for rate in ramp:
@@ -379,11 +394,6 @@ def main(argv: list[str] | None = None) -> None:
             seconds=min(seconds, 10.0),
             postgres_url=args.postgres,
             drain_timeout=60.0,
-        )
-        f = rows[key]
-        print(
-            f"  done {f.done}/{f.batches}, {f.throughput:.1f}/s, done p99 {f.done_p99_ms:.0f} ms",
-            file=sys.stderr,
         )
     print(
         f"\nPBD-AG end to end over HTTP: one 640x480 frame per batch ({templates[0].objects} "
@@ -409,14 +419,8 @@ def main(argv: list[str] | None = None) -> None:
             body_bytes_mean=int(statistics.mean(sizes)),
             object_masks=templates[0].objects,
             fixture_masks=[t.fixtures for t in templates],
-            clock="latency to done: the batch's finished_at minus its scheduled send time "
-            "(time.time()), one machine's wall clock; send_lag_p99_ms is how late sends started",
-            service_settings={
-                "PBDAG_ALLOW_ANONYMOUS_LOCAL": "true",
-                "PBDAG_RATE_LIMIT_PER_MINUTE": "0",
-                "PBDAG_MAX_QUEUED_BATCHES_PER_SCENE": "1000000",
-                "PBDAG_LOG_LEVEL": "WARNING",
-            },
+            clock=CLOCK,
+            service_settings=SERVICE_SETTINGS,
             load_average_at_start=load_average,
             stage_breakdown_ms=breakdown,
             configs=rows,

@@ -7,7 +7,7 @@ from dataclasses import replace
 import orjson
 import sqlalchemy as sa
 
-from core.events import ObjectAdded, Observation
+from core.events import ObjectAdded, Observation, VisibleMiss
 from service.bootstrap import Container
 from service.store.engine import write_transaction
 from service.store.tables import events as events_table
@@ -74,3 +74,17 @@ def poison_the_log(container: Container, scene_id: str) -> int:
             sa.update(scenes_table).where(scenes_table.c.id == scene_id).values(head_seq=head + 1)
         )
     return int(head + 1)
+
+
+def missed(track_id: str, logodds: float, misses: int) -> VisibleMiss:
+    """A visible-miss update."""
+    return VisibleMiss(
+        track_id=track_id,
+        state="tentative",
+        frame_id="f",
+        samples_passed=9,
+        samples_total=27,
+        existence_logodds=logodds,
+        p_exist=0.5,
+        visible_misses=misses,
+    )

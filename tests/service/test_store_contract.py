@@ -10,7 +10,7 @@ import pytest
 import sqlalchemy as sa
 
 from core.errors import StateConflict
-from core.events import Event, VisibleMiss
+from core.events import Event
 from core.params import Params
 from core.state import SceneState
 from service.bootstrap import Container
@@ -36,21 +36,7 @@ from service.store.queue_records import (
 )
 from service.store.snapshot_codec import SNAPSHOT_VERSION
 from service.store.tables import snapshots, tracks
-from tests.service.minimal_events import added
-
-
-def missed(track_id: str, logodds: float, misses: int) -> VisibleMiss:
-    """A visible-miss update."""
-    return VisibleMiss(
-        track_id=track_id,
-        state="tentative",
-        frame_id="f",
-        samples_passed=9,
-        samples_total=27,
-        existence_logodds=logodds,
-        p_exist=0.5,
-        visible_misses=misses,
-    )
+from tests.service.minimal_events import added, missed
 
 
 @pytest.fixture
