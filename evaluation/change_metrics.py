@@ -14,7 +14,8 @@ from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
-from core.events import TrackConfirmed, TrackEvent, TrackMoved, TrackRemoved, TrackReparented
+from core.event_envelope import TrackEvent
+from core.events import TrackConfirmed, TrackMoved, TrackRemoved, TrackReparented
 from evaluation.metrics import (
     matchable,
     present_objects,

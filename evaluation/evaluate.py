@@ -14,12 +14,12 @@ from typing import Any
 from api_schema import BatchIn
 from codec.observations import decode_batch
 from core.decide import decide
+from core.event_envelope import TrackEvent
 from core.event_records import event_from_record
 from core.events import (
     Event,
     SceneCreated,
     TrackConfirmed,
-    TrackEvent,
     TrackMoved,
     TrackRemoved,
     TrackReparented,

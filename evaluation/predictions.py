@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from core.events import TrackEvent, TrackReparented
+from core.event_envelope import TrackEvent
+from core.events import TrackReparented
 from sim.truth import Vec3
 
 

@@ -15,6 +15,7 @@ PACKAGES = (
     "pbdag_errors",
     "core",
     "api_schema",
+    "codec",
     "pbdag_client",
     "service",
     "migrations",

@@ -7,7 +7,8 @@ from dataclasses import replace
 import orjson
 import sqlalchemy as sa
 
-from core.events import ObjectAdded, Observation, VisibleMiss
+from core.events import ObjectAdded, VisibleMiss
+from core.values import Observation
 from service.bootstrap import Container
 from service.store.engine import write_transaction
 from service.store.tables import events as events_table

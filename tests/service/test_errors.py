@@ -15,6 +15,7 @@ import pytest
 from fastapi import FastAPI, Request
 from starlette.types import Message
 
+import codec
 import core
 import service
 from api_schema import BatchIn
@@ -363,8 +364,8 @@ BASES = {"AccessProblem", "DomainError"}
 def test_what_a_client_can_cause_is_a_4xx_and_what_the_server_fails_at_a_500() -> None:
     """The table reads along the two branches: every refusal of the service or the core has its
     own 4xx (a quota's 507 aside), every failure is the bare 500."""
-    imported_everything(core, service)
-    ours = ("core.", "service.")
+    imported_everything(core, codec, service)
+    ours = ("core.", "codec.", "service.")
     refusals = {
         cls
         for cls in every_subclass(Refused)
