@@ -39,7 +39,7 @@ openapi: setup  ## regenerate api_schema/openapi.json from the app
 vendor:  ## refetch the vendored Swagger UI assets from the npm registry (pinned, sha256 checked)
 	bash scripts/vendor-assets.sh
 
-bench: setup  ## the performance benchmarks (figures printed and written to bench/results/), then one table of every figure, its goal and its peer, from which the README's table is rewritten
+bench: setup  ## the performance benchmarks (figures printed and written to bench/results/), then one table of every figure, its goal and its peer, from which the table of docs/benchmarks.md is rewritten
 	$(BIN)/pip install --quiet -e '.[bench]'
 	$(BIN)/python -m bench.bench_render
 	$(BIN)/python -m bench.bench_decide
@@ -53,7 +53,7 @@ bench: setup  ## the performance benchmarks (figures printed and written to benc
 	$(BIN)/python -m bench.bench_blobs --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test
 	$(BIN)/python -m bench.bench_memory
 	$(BIN)/python -m bench.bench_service --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test --ramp 6,8,10,12
-	$(BIN)/python -m bench.summary --write-readme
+	$(BIN)/python -m bench.summary --write-docs
 
 soak: setup  ## the long fault runs: 40 SIGKILLs, a PostgreSQL restart, a poison batch; blobs in PostgreSQL, then in a shared folder; SQLite (about 6 minutes)
 	$(BIN)/python -m tests.e2e.fault_run --kills 40 --postgres-restart --poison

@@ -1,11 +1,11 @@
 """One table of every benchmark's figures, its goal, the peer measured in the same run, and the
 verdict, read from the JSON the benchmarks wrote under bench/results/.
 
-    python -m bench.summary [--results DIR] [--write-readme [--readme PATH]]
+    python -m bench.summary [--results DIR] [--write-docs [--doc PATH]]
 
 A benchmark whose JSON is missing is listed as not run; one whose JSON lacks a figure this reads
 is listed as unreadable. The table is printed and written to bench/results/summary.json.
-`--write-readme` rewrites the README's benchmark table (between its `bench-table` markers): the
+`--write-docs` rewrites the benchmark table of docs/benchmarks.md (between its `bench-table` markers): the
 figure of every benchmark that has results is replaced, the command column is kept, and a row
 whose benchmark has no results here stays as it was written.
 """
@@ -45,10 +45,10 @@ from bench.summary_readers import (
 
 Result = TypeVar("Result")
 RESULTS_DIR = Path(__file__).resolve().parent / "results"
-README = Path(__file__).resolve().parent.parent / "README.md"
+BENCHMARKS_DOC = Path(__file__).resolve().parent.parent / "docs" / "benchmarks.md"
 START_MARKER = "<!-- bench-table:start -->"
 END_MARKER = "<!-- bench-table:end -->"
-README_HEADER = (
+TABLE_HEADER = (
     "| benchmark | command | figure on this machine (2 cores) |",
     "| --- | --- | --- |",
 )
@@ -102,16 +102,16 @@ class Bench(Generic[Result]):
     """A benchmark: how it is run, the file it writes, its record, and how its figures are read."""
 
     key: str
-    command: str  # as in the README's command column (module, then subcommand)
+    command: str  # as in the table's command column (module, then subcommand)
     pattern: str  # the file name under bench/results/ (a glob: the newest match is read)
     record: type[Result]  # what the benchmark writes (bench/records.py)
     read: Callable[[Result], list[Figure]]
     goals: tuple[str, ...] = field(default=())
-    notes: str = ""  # where the README explains the figures (why a goal is missed)
+    notes: str = ""  # where bench/README.md explains the figures (why a goal is missed)
 
     @property
     def invocation(self) -> str:
-        """The module and subcommand (`bench.bench_store raw`), which names a README row."""
+        """The module and subcommand (`bench.bench_store raw`), which names a table row."""
         return invocation(self.command) or self.command
 
 
@@ -139,7 +139,7 @@ BENCHES: tuple[Bench[Any], ...] = (
         records.FixtureStepResult,
         read_fixture_step,
         ("fixture_step",),
-        notes="bench/README.md#the-fixture-step",
+        notes="../bench/README.md#the-fixture-step",
     ),
     Bench(
         "plan",
@@ -172,7 +172,7 @@ BENCHES: tuple[Bench[Any], ...] = (
         records.AsOfResult,
         read_as_of,
         ("as_of",),
-        notes="bench/README.md#as_of",
+        notes="../bench/README.md#as_of",
     ),
     Bench(
         "store-versus",
@@ -181,7 +181,7 @@ BENCHES: tuple[Bench[Any], ...] = (
         records.VersusResult,
         read_versus,
         ("versus",),
-        notes="bench/README.md#appending-against-the-eventsourcing-library",
+        notes="../bench/README.md#appending-against-the-eventsourcing-library",
     ),
     Bench(
         "store-raw",
@@ -190,7 +190,7 @@ BENCHES: tuple[Bench[Any], ...] = (
         records.RawResult,
         read_raw,
         ("raw",),
-        notes="bench/README.md#raw-batches",
+        notes="../bench/README.md#raw-batches",
     ),
     Bench(
         "blobs",
@@ -198,7 +198,7 @@ BENCHES: tuple[Bench[Any], ...] = (
         "blobs.json",
         records.BlobsResult,
         read_blobs,
-        notes="#running-on-several-hosts",
+        notes="operations.md#running-on-several-hosts",
     ),
     Bench(
         "memory",
@@ -207,7 +207,7 @@ BENCHES: tuple[Bench[Any], ...] = (
         records.MemoryResult,
         read_memory,
         ("memory",),
-        notes="#limits-backpressure-and-failures",
+        notes="operations.md#limits-backpressure-and-failures",
     ),
     Bench(
         "service",
@@ -216,7 +216,7 @@ BENCHES: tuple[Bench[Any], ...] = (
         records.ServiceResult,
         read_service,
         ("service_one_worker", "service_two_workers"),
-        notes="bench/README.md",
+        notes="../bench/README.md",
     ),
 )
 
@@ -303,8 +303,8 @@ def table(rows: Sequence[Row]) -> str:
     return "\n".join([text[0], rule, *text[1:]])
 
 
-def readme_figure(bench: Bench[Any], rows: Sequence[Row]) -> str:
-    """A benchmark's figure cell in the README: each figure, its peer, its goal and verdict
+def doc_figure(bench: Bench[Any], rows: Sequence[Row]) -> str:
+    """A benchmark's figure cell in the table: each figure, its peer, its goal and verdict
     (one line each), then where its figures are explained."""
     parts = []
     for row in rows:
@@ -324,7 +324,7 @@ def split_row(line: str) -> list[str]:
     return [cell.strip() for cell in line.strip().strip("|").split(" | ")]
 
 
-def readme_table(lines: Sequence[str], rows: Sequence[Row]) -> list[str]:
+def doc_table(lines: Sequence[str], rows: Sequence[Row]) -> list[str]:
     """The table's new lines: a row of a benchmark with results gets its figure from them; the
     others stay as written; a benchmark with results and no row gets one at the end."""
     by_bench: dict[str, list[Row]] = {}
@@ -332,45 +332,51 @@ def readme_table(lines: Sequence[str], rows: Sequence[Row]) -> list[str]:
         if row.status == "run":
             by_bench.setdefault(row.benchmark, []).append(row)
     benches = {bench.invocation: bench for bench in BENCHES}
-    out, seen = list(README_HEADER), set()
+    out, seen = list(TABLE_HEADER), set()
     for line in lines:
-        if not line.strip() or line.strip() in README_HEADER:
+        if not line.strip() or line.strip() in TABLE_HEADER:
             continue
         cells = split_row(line)
         bench = benches.get(invocation(cells[1]) or "") if len(cells) == 3 else None
         if bench is not None:
             seen.add(bench.key)
             if bench.key in by_bench:
-                line = f"| {cells[0]} | {cells[1]} | {readme_figure(bench, by_bench[bench.key])} |"
+                line = f"| {cells[0]} | {cells[1]} | {doc_figure(bench, by_bench[bench.key])} |"
         out.append(line.rstrip())
     for bench in BENCHES:
         if bench.key in by_bench and bench.key not in seen:
             label = by_bench[bench.key][0].label
             out.append(
-                f"| {label} | `{bench.command}` | {readme_figure(bench, by_bench[bench.key])} |"
+                f"| {label} | `{bench.command}` | {doc_figure(bench, by_bench[bench.key])} |"
             )
     return out
 
 
-def rewrite_readme(text: str, rows: Sequence[Row]) -> str:
+def rewrite_table(text: str, rows: Sequence[Row]) -> str:
     """`text` with the table between the markers regenerated; everything else unchanged."""
     start, end = text.find(START_MARKER), text.find(END_MARKER)
     if start < 0 or end < start:
-        raise ValueError(f"the README has no {START_MARKER} ... {END_MARKER} block")
+        raise ValueError(f"the page has no {START_MARKER} ... {END_MARKER} block")
     body_start = start + len(START_MARKER)
     old = text[body_start:end].strip("\n").splitlines()
-    new = "\n".join(readme_table(old, rows))
+    new = "\n".join(doc_table(old, rows))
     return f"{text[:body_start]}\n{new}\n{text[end:]}"
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Print the table, write summary.json, and with --write-readme the README's table."""
+    """Print the table, write summary.json, and with --write-docs the table of docs/benchmarks.md."""
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("--results", type=Path, default=RESULTS_DIR, help="where the JSON is")
-    parser.add_argument("--write-readme", action="store_true", help="regenerate the README table")
-    parser.add_argument("--readme", type=Path, default=README)
+    parser.add_argument(
+        "--write-docs",
+        action="store_true",
+        help="regenerate the benchmark table of docs/benchmarks.md",
+    )
+    parser.add_argument(
+        "--doc", type=Path, default=BENCHMARKS_DOC, help="the page holding the table"
+    )
     args = parser.parse_args(argv)
     rows = summary(args.results)
     print(table(rows))
@@ -378,15 +384,15 @@ def main(argv: list[str] | None = None) -> None:
     path = args.results / "summary.json"
     path.write_text(json.dumps({"rows": [asdict(row) for row in rows]}, indent=2) + "\n")
     print(f"wrote {path}")
-    if args.write_readme:
-        before = args.readme.read_text()
+    if args.write_docs:
+        before = args.doc.read_text()
         try:
-            after = rewrite_readme(before, rows)
+            after = rewrite_table(before, rows)
         except ValueError as error:
-            sys.exit(f"{args.readme}: {error}")
+            sys.exit(f"{args.doc}: {error}")
         if after != before:
-            args.readme.write_text(after)
-        print(f"{'rewrote' if after != before else 'unchanged:'} {args.readme}")
+            args.doc.write_text(after)
+        print(f"{'rewrote' if after != before else 'unchanged:'} {args.doc}")
     sys.stdout.flush()
 
 

@@ -56,7 +56,7 @@ class Goal:
 
 # The goals, in one place: issue 11 ("Real time end to end, ahead of the reference event store,
 # and bounded storage": fixture step, appending against `eventsourcing`, as_of, raw batches, the
-# service end to end) and the goals the README's benchmark table already held (render, decide,
+# service end to end) and the goals the benchmark table (docs/benchmarks.md) already held (render, decide,
 # append, planner, rollout, memory budget).
 GOALS: dict[str, Goal] = {
     "render": Goal(">= 30 frames/s", ">=", 30.0, " frames/s"),

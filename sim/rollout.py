@@ -65,7 +65,7 @@ FloatArray = npt.NDArray[np.float64]
 
 @dataclass(frozen=True)
 class RolloutSettings:
-    """How the simulated robot acts; defaults are the protocol's (documented in the README)."""
+    """How the simulated robot acts; defaults are the protocol's (documented in sim/scenarios/README.md)."""
 
     keyframe_budget: int = 600  # coarse discovery: semantic keyframes posted on the way
     # Inspections the memory recorded (None: until the plan is done). A capture the memory

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import yaml
 
+from tests.import_graph import ROOT, imported_roots
+
 DOCKER = Path(__file__).resolve().parents[1] / "docker"
 
 
@@ -45,3 +47,17 @@ def test_compose_shares_nothing_but_the_database_between_api_and_workers() -> No
         service = compose["services"][name]
         assert "volumes" not in service
         assert service["environment"]["PBDAG_BLOB_BACKEND"] == "postgres"
+
+
+def test_the_image_copies_every_package_the_service_imports() -> None:
+    """`pip install .` in the image sees only what is copied: every package of this repository
+    that the service imports, directly or through another one, must be there."""
+    copied = set(re.findall(r"^COPY\s+(\w+)\s", (DOCKER / "Dockerfile").read_text(), re.MULTILINE))
+    packages = {p.parent.name for p in ROOT.glob("*/__init__.py")}
+    needed, todo = set(), ["service"]
+    while todo:
+        package = todo.pop()
+        needed.add(package)
+        for path in (ROOT / package).rglob("*.py"):
+            todo += sorted((imported_roots(path) & packages) - needed - set(todo))
+    assert needed <= copied, f"not copied: {sorted(needed - copied)}"

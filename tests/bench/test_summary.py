@@ -14,13 +14,13 @@ from bench.summary import (
     START_MARKER,
     invocation,
     main,
-    rewrite_readme,
+    rewrite_table,
     split_row,
     summary,
 )
 from bench.summary_readers import GOALS, Goal
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+README = Path(__file__).resolve().parents[2] / "docs" / "benchmarks.md"
 
 
 def test_missing_results_read_not_run(tmp_path: Path) -> None:
@@ -38,14 +38,14 @@ def test_without_results_the_readme_is_left_as_it_is(
 ) -> None:
     readme = tmp_path / "README.md"
     readme.write_text(README.read_text())
-    main(["--results", str(tmp_path / "results"), "--write-readme", "--readme", str(readme)])
+    main(["--results", str(tmp_path / "results"), "--write-docs", "--doc", str(readme)])
     assert readme.read_text() == README.read_text()
     assert "unchanged:" in capsys.readouterr().out
     saved = json.loads((tmp_path / "results" / "summary.json").read_text())
     assert len(saved["rows"]) == len(BENCHES)
 
 
-def test_every_benchmark_has_a_row_in_the_readme_table() -> None:
+def test_every_benchmark_has_a_row_in_the_doc_table() -> None:
     text = README.read_text()
     block = text[text.index(START_MARKER) + len(START_MARKER) : text.index(END_MARKER)]
     commands = [split_row(line)[1] for line in block.strip().splitlines()[2:]]
@@ -56,7 +56,7 @@ def test_every_benchmark_has_a_row_in_the_readme_table() -> None:
 
 def test_a_readme_without_markers_is_refused() -> None:
     with pytest.raises(ValueError, match="bench-table"):
-        rewrite_readme("# no table\n", summary(Path("/nonexistent")))
+        rewrite_table("# no table\n", summary(Path("/nonexistent")))
 
 
 def test_goal_verdicts() -> None:

@@ -15,7 +15,7 @@ from bench.records import (
     DecideResult,
     to_json,
 )
-from bench.summary import BENCHES, END_MARKER, START_MARKER, Row, main, rewrite_readme, summary
+from bench.summary import BENCHES, END_MARKER, START_MARKER, Row, main, rewrite_table, summary
 from tests.bench.written_results import (
     write_all,
     write_fixture_step,
@@ -28,7 +28,7 @@ from tests.eval_extra import require_eval_extra
 
 require_eval_extra()  # the benchmarks import the simulator
 
-README = Path(__file__).resolve().parents[2] / "README.md"
+README = Path(__file__).resolve().parents[2] / "docs" / "benchmarks.md"
 
 
 @pytest.fixture
@@ -119,7 +119,7 @@ def test_the_table_prints_every_row_and_summary_json_holds_them(
     write_plan(monkeypatch)
     write_rollout(monkeypatch)
     readme = results.parent / "README.md"
-    main(["--results", str(results), "--readme", str(readme)])
+    main(["--results", str(results), "--doc", str(readme)])
     printed = capsys.readouterr().out
     for label in ("planner decision", "autonomous rollout", "store-versus", "service"):
         assert label in printed
@@ -128,7 +128,7 @@ def test_the_table_prints_every_row_and_summary_json_holds_them(
     assert [row["benchmark"] for row in saved][:3] == ["render", "decide", "fixture_step"]
     plan = next(row for row in saved if row["benchmark"] == "plan")
     assert (plan["status"], plan["source"], plan["verdict"]) == ("run", "bench_plan.json", "met")
-    assert not readme.exists()  # only --write-readme touches a README
+    assert not readme.exists()  # only --write-docs touches a README
 
 
 def test_a_file_of_another_shape_is_unreadable_not_an_error(results: Path) -> None:
@@ -170,8 +170,8 @@ def test_readme_regeneration_replaces_only_the_rows_run_and_is_idempotent(
     write_fixture_step(monkeypatch)
     write_store(monkeypatch)
     rows = summary(results)
-    once = rewrite_readme(text, rows)
-    assert rewrite_readme(once, rows) == once
+    once = rewrite_table(text, rows)
+    assert rewrite_table(once, rows) == once
     start, end = once.index(START_MARKER), once.index(END_MARKER)
     assert once[:start] == text[: text.index(START_MARKER)]
     assert once[end:] == text[text.index(END_MARKER) :]

@@ -1,0 +1,40 @@
+"""The client examples (docs/client.md, and the README's) run as written against a real service."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import re
+from pathlib import Path
+
+from tests.client.conftest import Service
+
+ROOT = Path(__file__).resolve().parents[2]
+CLIENT_GUIDE = ROOT / "docs" / "client.md"
+README = ROOT / "README.md"
+
+
+def first_python_block(page: Path) -> str:
+    """The first Python block of a page."""
+    found = re.search(r"```python\n(.*?)```", page.read_text(), re.DOTALL)
+    assert found is not None, f"{page.name} has no Python example"
+    return found.group(1)
+
+
+def run_example(code: str, url: str, name: str) -> list[str]:
+    """The lines an example prints, run against the service at `url`."""
+    assert "http://127.0.0.1:8000" in code and len(code.splitlines()) <= 16
+    printed = io.StringIO()
+    with contextlib.redirect_stdout(printed):
+        exec(compile(code.replace("http://127.0.0.1:8000", url), name, "exec"), {})
+    return printed.getvalue().splitlines()
+
+
+def test_the_guide_example_posts_a_frame_and_explains_the_track(service: Service) -> None:
+    lines = run_example(first_python_block(CLIENT_GUIDE), service.url, "docs/client.md")
+    assert len(lines) == 1 and lines[0].startswith("trk-") and " mug " in lines[0]
+    assert "mug) is tentative" in lines[0] and "frame f000001" in lines[0]
+    # The README's example then lists that scene's nodes, the hypothesis included.
+    listed = run_example(first_python_block(README), service.url, "README.md")
+    track_id = lines[0].split()[0]
+    assert listed == [f"{track_id} mug tentative None"]
