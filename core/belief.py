@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 from core.params import ExistenceParams
 
@@ -50,3 +50,25 @@ def class_distribution(label: str, scores: Mapping[str, float] | None) -> dict[s
 def class_compatibility(belief: Mapping[str, float], observed: Mapping[str, float]) -> float:
     """How likely a track and a detection name the same class: sum_c p_track(c) q_det(c)."""
     return sum(p * observed.get(name, 0.0) for name, p in belief.items())
+
+
+def add_support_evidence(
+    previous: Mapping[str, float], parents: Sequence[str | None], weight: float
+) -> dict[str, float]:
+    """Support-parent evidence after one batch: `weight` for each sighting's parent (p_parent
+    is this normalized)."""
+    evidence = dict(previous)
+    for parent in parents:
+        if parent is not None:
+            evidence[parent] = evidence.get(parent, 0.0) + weight
+    return evidence
+
+
+def most_supported(evidence: Mapping[str, float], current: str | None = None) -> str | None:
+    """Most supported key; the current one keeps ties, then names decide."""
+    if not evidence:
+        return None
+    best = max(evidence.values())
+    if current is not None and evidence.get(current) == best:
+        return current
+    return min(key for key, weight in evidence.items() if weight == best)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from core.events import FixtureEvidence
@@ -25,15 +26,15 @@ from core.values import VoxelDetection
 from core.voxels import unpack
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class FixtureBatch:
     """What the batch's fixture masks say: new evidence, and per track the proposal it explains."""
 
     evidence_event: FixtureEvidence | None = None
-    observed: dict[str, FixtureProposal] = field(default_factory=dict)  # track id -> proposal
-    unexplained: list[FixtureProposal] = field(default_factory=list)  # new hypotheses
-    proposals: list[FixtureProposal] = field(default_factory=list)  # every plausible cluster
-    merged: dict[str, str] = field(default_factory=dict)  # second track -> the one it joins
+    observed: Mapping[str, FixtureProposal] = field(default_factory=dict)  # track id -> proposal
+    unexplained: tuple[FixtureProposal, ...] = ()  # new hypotheses
+    proposals: tuple[FixtureProposal, ...] = ()  # every plausible cluster
+    merged: Mapping[str, str] = field(default_factory=dict)  # second track -> the one it joins
 
 
 def fixture_batch(
@@ -45,6 +46,62 @@ def fixture_batch(
     (`core.fixture_map`); `incremental=False` clusters the whole map anew, the reference they
     equal.
     """
+    fixture_params = params.fixtures
+    evidence = batch_voxel_evidence(batch, params)
+    if not evidence:
+        return FixtureBatch()
+    evidence_event = FixtureEvidence(
+        detections=tuple(
+            VoxelDetection(
+                frame_id=e.frame_id,
+                class_scores=e.class_scores,
+                voxels=tuple(unpack(e.voxels).ravel().tolist()),
+            )
+            for e in evidence
+        )
+    )
+    # Query the accumulated map against the taxonomy, then cluster each class.
+    if incremental:
+        update = state.voxels.update(
+            fixture_params, [(e.voxels, e.class_scores) for e in evidence], evidence_event
+        )
+        proposals = update.proposals(evidence)
+    else:
+        voxels = state.voxels
+        keys, counts, sums = merged_voxels((voxels.keys, voxels.counts, voxels.sums), evidence)
+        kept, scores, margins = kept_voxels(counts, sums, fixture_params)
+        proposals = fixture_proposals(
+            keys, counts, sums, kept, scores, margins, evidence, fixture_params
+        )
+    # A hypothesis retired unseen has left the memory in play, as retired objects do: seen
+    # again, its place makes a new hypothesis. One retired by a rejection still explains its
+    # cluster, so that what a verifier rejected is not proposed anew.
+    tracks = [
+        FixtureTrackView(t.track_id, t.label, t.center, t.extent)
+        for t in (state.tracks[i] for i in sorted(state.tracks))
+        if t.kind == "fixture" and (t.lifecycle != "retired" or t.verification == "rejected")
+    ]
+    matches, absorbed = associate_fixtures(proposals, tracks, fixture_params)
+    # Positive evidence only from what this batch saw.
+    observed = {
+        matches[j]: p for j, p in enumerate(proposals) if j in matches and p.contributed > 0
+    }
+    unexplained = tuple(
+        p
+        for j, p in enumerate(proposals)
+        if j not in matches and j not in absorbed and p.contributed > 0
+    )
+    merged = (
+        contained_tracks(state, tracks, matches, proposals, params)
+        if fixture_params.absorb_contained_tracks
+        else {}
+    )
+    return FixtureBatch(evidence_event, observed, unexplained, tuple(proposals), merged)
+
+
+def batch_voxel_evidence(batch: Batch, params: Params) -> list[VoxelEvidence]:
+    """The voxels each fixture mask of the batch covers, within the batch's point and voxel
+    budgets."""
     fixture_params = params.fixtures
     evidence: list[VoxelEvidence] = []
     budget = fixture_params.max_voxels_per_batch
@@ -68,52 +125,7 @@ def fixture_batch(
             if item is not None and item.voxels.size <= budget:
                 evidence.append(item)
                 budget -= item.voxels.size
-    result = FixtureBatch()
-    if not evidence:
-        return result
-    result.evidence_event = FixtureEvidence(
-        detections=tuple(
-            VoxelDetection(
-                frame_id=e.frame_id,
-                class_scores=e.class_scores,
-                voxels=tuple(unpack(e.voxels).ravel().tolist()),
-            )
-            for e in evidence
-        )
-    )
-    # Query the accumulated map against the taxonomy, then cluster each class.
-    if incremental:
-        update = state.voxels.update(
-            fixture_params, [(e.voxels, e.class_scores) for e in evidence], result.evidence_event
-        )
-        proposals = update.proposals(evidence)
-    else:
-        voxels = state.voxels
-        keys, counts, sums = merged_voxels((voxels.keys, voxels.counts, voxels.sums), evidence)
-        kept, scores, margins = kept_voxels(counts, sums, fixture_params)
-        proposals = fixture_proposals(
-            keys, counts, sums, kept, scores, margins, evidence, fixture_params
-        )
-    result.proposals = proposals
-    # A hypothesis retired unseen has left the memory in play, as retired objects do: seen
-    # again, its place makes a new hypothesis. One retired by a rejection still explains its
-    # cluster, so that what a verifier rejected is not proposed anew.
-    tracks = [
-        FixtureTrackView(t.track_id, t.label, t.center, t.extent)
-        for t in (state.tracks[i] for i in sorted(state.tracks))
-        if t.kind == "fixture" and (t.lifecycle != "retired" or t.verification == "rejected")
-    ]
-    matches, absorbed = associate_fixtures(proposals, tracks, fixture_params)
-    for j, proposal in enumerate(proposals):
-        track_id = matches.get(j)
-        if track_id is not None:
-            if proposal.contributed > 0:  # positive evidence only from what this batch saw
-                result.observed[track_id] = proposal
-        elif j not in absorbed and proposal.contributed > 0:
-            result.unexplained.append(proposal)
-    if fixture_params.absorb_contained_tracks:
-        result.merged = contained_tracks(state, tracks, matches, proposals, params)
-    return result
+    return evidence
 
 
 def contained_tracks(

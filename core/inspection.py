@@ -7,25 +7,26 @@ show the fixture's support region. They are never fused.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import partial
 from typing import Literal
 
 import numpy as np
 
-from core.association import associate, fragments
-from core.batch_evidence import BatchEvidence
-from core.decide import ground_frame
+from core.decisions import TrackDecision
+from core.emit import decision_events
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
-from core.events import Event, InspectionRecorded, ObjectAdded, ObjectObserved, TrackConfirmed
+from core.events import Event, InspectionRecorded
+from core.existence import capture_updates
+from core.frontend import associate_capture
 from core.geometry import Proposal
+from core.grounding import ground_frame
+from core.lifecycle import capture_decisions
 from core.masks import Mask, mask_iou
 from core.observation import Frame
 from core.params import Params
 from core.state import SceneState, Track
 from core.support import SupportSurface, support_of
-from core.transitions import added_object, confirmed, observed_object, visible_miss
-from core.values import InspectionStatus, ViewPose, vec3
-from core.visibility import observable, samples_passed
+from core.values import InspectionStatus, ViewPose
+from core.visibility import Sighting, observable, samples_passed
 
 SUPPORT_SLAB_M = 0.02  # thickness of the sampled support region (the fixture's top surface)
 
@@ -86,6 +87,8 @@ def decide_inspection(
         raise StateConflict(
             f"fixture {fixture_id!r} is {fixture.lifecycle}, not confirmed", "fixture_id"
         )
+    # 1. Visibility: the primary view is the first that shows the fixture's support region; in
+    #    it, the fine nodes the ledger holds on the fixture (section 3.4).
     primary = next(
         (
             f
@@ -99,11 +102,12 @@ def decide_inspection(
         outcome = "parent_rejected"  # the client's model says this is not the fixture
     elif primary is None:
         outcome = "support_not_visible"
-    events: list[Event] = []
+    decisions: tuple[TrackDecision, ...] = ()
     children: list[str] = []
     if outcome == "completed":
         assert primary is not None
-        events, children = _attach_children(state, fixture, primary, params)
+        held = _held_children(state, fixture, primary, params)
+        decisions, children = _attach_children(state, fixture, primary, held, params)
     attempts = fixture.inspection_attempts + (outcome != "completed")
     status: InspectionStatus | None = (
         "completed"
@@ -126,97 +130,51 @@ def decide_inspection(
         status=status,
         view=view,
     )
-    return [*events, record]
+    return [*decision_events(decisions, params), record]
 
 
 def _attach_children(
-    state: SceneState, fixture: Track, frame: Frame, params: Params
-) -> tuple[list[Event], list[str]]:
-    """Ground the primary view, keep what lies on this fixture, and attach it as children."""
+    state: SceneState,
+    fixture: Track,
+    frame: Frame,
+    held: Sequence[tuple[Track, Sighting]],
+    params: Params,
+) -> tuple[tuple[TrackDecision, ...], list[str]]:
+    """The capture's children through the batch's stages: the primary view's grounded
+    proposals that rest on this fixture, the frame-level front end, equation (3), then the
+    lifecycle rules, where the verified capture stands in for cross-batch confirmation."""
+    # 2. Grounded proposals, same-class NMS and cross-class suppression, support on the fixture.
     surface = [SupportSurface(fixture.track_id, fixture.center, fixture.extent)]
     proposals = ground_frame(frame, params)
     masks = [frame.detections[p.detection_index].mask for p in proposals]
-    kept = [
-        i
+    chosen = [
+        proposals[i]
         for i in suppress(proposals, masks, params)
         if support_of(proposals[i].center, proposals[i].bottom_z, surface, params.fixtures)
         == fixture.track_id
     ]
-    evidence = BatchEvidence(state, params)
-    chosen = [proposals[i] for i in kept]
-    matches = associate(
-        chosen,
-        evidence.pool(),
-        params.association,
-        partial(fragments, chosen, size_of=evidence.extent_of, params=params.association),
+    # 3. Association: the frame-level front end (section 3.3).
+    assigned = associate_capture(state, chosen, params)
+    children = [track_id for _, track_id in assigned]
+    # 4. Existence, equation (3): each child seen, each held fine node it shows and did not find
+    #    a visible miss (only a capture speaks of what the capture ledger holds, section 3.3).
+    sightings, misses = capture_updates(
+        state, [(chosen[j], track_id) for j, track_id in assigned], fixture.track_id, held, params
     )
-    # A piece of an object another proposal of the view shows (an over-segmented mask) is not a
-    # second child, as in the frame-level front end.
-    pieces = fragments(chosen, matches, evidence.extent_of, params.association)
-    events: list[Event] = []
-    children: list[str] = []
-    next_number = state.next_track_number
-    for j, proposal in enumerate(chosen):
-        if j in pieces:
-            continue
-        parents = [fixture.track_id]
-        track_id = matches.get(j)
-        if track_id is not None and state.tracks[track_id].kind == "object":
-            observed = observed_object(state.tracks[track_id], [proposal], parents, params)
-            update = observed[0]
-            assert isinstance(update, ObjectObserved)
-            if update.state != "confirmed" and not any(
-                isinstance(e, TrackConfirmed) for e in observed
-            ):
-                # A child matched a hypothesis or a removed track: the verified capture publishes
-                # it, as it does a new child (a child listed as completed is always in the graph).
-                observed.insert(
-                    1,
-                    confirmed(
-                        track_id,
-                        frame.frame_id,
-                        update.p_exist,
-                        vec3(proposal.center),
-                        update.batches_observed,
-                        reason="inspection",
-                    ),
-                )
-            events += observed
-        else:
-            track_id = f"trk-{next_number:06d}"
-            next_number += 1
-            added = added_object(track_id, [proposal], parents, params)
-            if any(isinstance(e, TrackConfirmed) for e in added):  # published on sight already
-                events += added
-            else:
-                # A verified capture stands in for cross-batch confirmation (section 3.2).
-                first = added[0]
-                assert isinstance(first, ObjectAdded)
-                confirm = confirmed(
-                    track_id,
-                    frame.frame_id,
-                    first.p_exist,
-                    vec3(proposal.center),
-                    1,
-                    reason="inspection",
-                )
-                events += [first, confirm, *added[1:]]
-        children.append(track_id)
-    return [*events, *_unseen_children(state, fixture, frame, set(children), params)], children
+    # 5. Lifecycle: publication, move, reparent; demotion and removal of the missed.
+    return capture_decisions(state, sightings, misses, params), children
 
 
-def _unseen_children(
-    state: SceneState, fixture: Track, frame: Frame, found: set[str], params: Params
-) -> list[Event]:
-    """Visible misses of the fixture's fine nodes this capture shows and did not find: only a
-    capture speaks of what the capture ledger holds (section 3.3)."""
+def _held_children(
+    state: SceneState, fixture: Track, frame: Frame, params: Params
+) -> list[tuple[Track, Sighting]]:
+    """The fine nodes the capture ledger holds on the fixture that `frame` shows (observable)."""
     held = [
         t
         for t in state.tracks.values()
         if t.capture_id is not None
         and t.lifecycle in ("confirmed", "demoted")
         and t.parent == fixture.track_id
-        and t.track_id not in found
     ]
     if not held:
         return []
@@ -228,11 +186,11 @@ def _unseen_children(
         params.visibility,
         probes=np.array([t.center for t in held]),
     )
-    events: list[Event] = []
-    for track, sighting in zip(held, sightings, strict=True):
-        if observable(sighting, params.visibility):
-            events += visible_miss(track, sighting.passed, frame.frame_id, params)
-    return events
+    return [
+        (track, sighting.seen_in(frame.frame_id))
+        for track, sighting in zip(held, sightings, strict=True)
+        if observable(sighting, params.visibility)
+    ]
 
 
 def _box_of(track: Track) -> tuple[tuple[float, ...], tuple[float, ...]]:

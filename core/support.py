@@ -2,16 +2,17 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from core.fixtures import FixtureProposal, ema_center, footprint_of
+from core.geometry import Proposal
 from core.graph import is_published
-from core.params import FixtureParams
-from core.state import Track
+from core.params import FixtureParams, Params
+from core.state import SceneState, Track
 from core.values import vec3
 
 
@@ -75,3 +76,41 @@ def surface_of(
         center, extent = track.center, track.extent
     published = track is not None and is_published(track)
     return SupportSurface(track_id, center, extent, published)
+
+
+def support_parents(
+    state: SceneState,
+    fixtures: Mapping[str, FixtureProposal],
+    merged: Mapping[str, str],
+    observations: Mapping[str, Sequence[Proposal]],
+    params: Params,
+) -> dict[str, tuple[str | None, ...]]:
+    """Per object track a batch sighted, the support parent of each of its proposals, on the
+    fixture tops as this batch sees them (`fixtures`: the clusters it matched; `merged`: second
+    fixture tracks, which hold nothing)."""
+    if not observations:
+        return {}
+    fixture_ids = {
+        track_id
+        for track_id, kind in zip(state.arrays.track_ids, state.arrays.kinds, strict=True)
+        if kind == "fixture"
+    }
+    surfaces = [
+        surface
+        for track_id in sorted((fixture_ids | set(fixtures)) - set(merged))
+        if (
+            surface := surface_of(
+                state.tracks.get(track_id),
+                track_id,
+                fixtures.get(track_id),
+                params.fusion.fixture_center_alpha,
+            )
+        )
+        is not None
+    ]
+    return {
+        track_id: tuple(
+            support_of(p.center, p.bottom_z, surfaces, params.fixtures) for p in proposals
+        )
+        for track_id, proposals in observations.items()
+    }

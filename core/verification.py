@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from typing import Literal
 
+from core.emit import decision_events
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
-from core.events import Event, TrackRemoved, TrackVerified
-from core.lifecycle import should_confirm
+from core.events import Event
+from core.existence import verdict_update
+from core.lifecycle import verdict_decision
 from core.params import Params
-from core.state import SceneState, logistic
-from core.transitions import confirmed, fixture_verdict_logodds
+from core.state import SceneState
 
 
 def decide_verdict(
@@ -39,43 +40,5 @@ def decide_verdict(
     label = label or track.label
     if track.kind == "fixture" and label not in params.fixtures.taxonomy:
         raise InvalidCommand(f"label {label!r} is not in the scene's fixture taxonomy", "label")
-    confirm = verdict == "confirm"
-    logodds = fixture_verdict_logodds(track, confirm, params)
-    p_exist = logistic(logodds)
-    events: list[Event] = [
-        TrackVerified(
-            track_id=track_id,
-            state=track.lifecycle,
-            frame_id=frame_id,
-            verdict=verdict,
-            label=label,
-            source=source,
-            verdict_frame=frame_id,
-            existence_logodds=logodds,
-            p_exist=p_exist,
-        )
-    ]
-    if not confirm:
-        # Rejected hypotheses are retired: removed, and never re-acquired.
-        events.append(
-            TrackRemoved(
-                track_id=track_id,
-                state="removed",
-                frame_id=frame_id,
-                p_exist=p_exist,
-                reason="verification_rejected",
-            )
-        )
-        return events
-    if should_confirm(track.kind, track.lifecycle, p_exist, track.batches_observed, params):
-        events.append(
-            confirmed(
-                track_id,
-                frame_id,
-                p_exist,
-                track.center,
-                track.batches_observed,
-                reason="verification",
-            )
-        )
-    return events
+    update = verdict_update(track, verdict == "confirm", label, source, frame_id, params)
+    return decision_events([verdict_decision(track, update, params)], params)

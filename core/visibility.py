@@ -14,6 +14,7 @@ object's.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -22,7 +23,9 @@ import numpy.typing as npt
 
 from core.geometry import box_samples, project, world_to_camera
 from core.observation import Frame
-from core.params import VisibilityParams
+from core.params import Params, VisibilityParams
+from core.rules import UpdateRules
+from core.state import SceneState
 
 FloatArray = npt.NDArray[np.float64]
 MissEvidence = Literal["visible", "free_space"]
@@ -56,6 +59,62 @@ def observable(sighting: Sighting, params: VisibilityParams, gate: bool = True) 
             and (sighting.center_empty or not params.miss_requires_empty_center)
         )
     )
+
+
+@dataclass(frozen=True)
+class BatchVisibility:
+    """V_i(t) for one batch: what its frames showed of each live track's stored box."""
+
+    best: Mapping[str, Sighting]  # per track shown at all: the sighting that stands for the batch
+    visible: frozenset[str]  # V_i(t) = 1 under the update rules: unmatched, a visible miss
+    # Per frame: the tracks whose place the frames up to it showed (the paper's gate), which
+    # the unique-class fallback counts as a look at an empty place when nothing matched them.
+    shown: tuple[frozenset[str], ...]
+
+
+def batch_visibility(
+    state: SceneState, frames: Sequence[Frame], params: Params, rules: UpdateRules
+) -> BatchVisibility:
+    """The gate over a batch's frames, for every live track that could be in view.
+
+    Removed and rejected tracks get no negative evidence, and neither do fine nodes held by the
+    capture ledger: only a capture of their fixture speaks of them (section 3.3).
+    """
+    arrays = state.arrays
+    live = ~arrays.gone & ~arrays.captured
+    best: dict[str, Sighting] = {}
+    shown: list[frozenset[str]] = []
+    for frame in frames:
+        rows = in_view_rows(arrays.box_centers, arrays.box_extents, frame, params.visibility)
+        rows = rows[live[rows]]
+        sightings = samples_passed(
+            arrays.box_centers[rows],
+            arrays.box_extents[rows],
+            frame,
+            params.visibility,
+            rules.visibility_gate,
+            rules.miss_evidence,
+            probes=arrays.centers[rows],
+        )
+        for row, sighting in zip(rows.tolist(), sightings, strict=True):
+            if sighting.passed == 0:
+                continue
+            track_id = arrays.track_ids[row]
+            held = best.get(track_id)
+            rank = _rank(sighting, params.visibility, rules.visibility_gate)
+            if held is None or rank > _rank(held, params.visibility, rules.visibility_gate):
+                best[track_id] = sighting.seen_in(frame.frame_id)
+        shown.append(frozenset(t for t, s in best.items() if observable(s, params.visibility)))
+    visible = frozenset(
+        t for t, s in best.items() if observable(s, params.visibility, rules.visibility_gate)
+    )
+    return BatchVisibility(best, visible, tuple(shown))
+
+
+def _rank(sighting: Sighting, params: VisibilityParams, gate: bool) -> tuple[bool, int, float]:
+    """Which of a batch's sightings of a track stands for the batch: one that would count a miss
+    first, then the one showing more of the box."""
+    return (observable(sighting, params, gate), sighting.passed, sighting.expected_fraction)
 
 
 def in_view_rows(

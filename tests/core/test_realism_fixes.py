@@ -6,18 +6,21 @@ from dataclasses import replace
 
 import numpy as np
 
-from core.batch_evidence import BatchEvidence
 from core.decide import decide
+from core.decisions import Publication
+from core.emit import decision_events
 from core.events import Event, TrackRetired
 from core.evolve import fold
+from core.existence import object_sighting
+from core.frontend import TrackColumns, second_tracks
 from core.geometry import Proposal
 from core.inspection import decide_inspection
+from core.lifecycle import sighting_decision
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame
 from core.params import Params
 from core.rules import UpdateRules
 from core.state import SceneState
-from core.transitions import added_object, confirmed
 from core.visibility import observable, samples_passed
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 from tests.core.scenes import (
@@ -415,14 +418,16 @@ def test_a_track_that_keeps_a_second_track_is_not_merged_away_in_the_same_batch(
             bottom_z=1.85,
         )
         track_id = f"trk-{number:06d}"
-        events = added_object(track_id, [proposal], [None], params)
+        sighting = object_sighting(None, track_id, [proposal], [None], params)
+        decision = sighting_decision(None, sighting, params)
         if published:
-            events.append(confirmed(track_id, f"f{number}", 0.8, (x, 0.0, 2.0), 2))
-        state = fold(state, events)
-    evidence = BatchEvidence(state, params)
-    for track_id in ("trk-000001", "trk-000002"):
-        evidence.observations[track_id] = []
-    assert evidence._duplicate_objects() == {"trk-000001": "trk-000003"}
+            decision = replace(decision, publish=Publication(0.8, (x, 0.0, 2.0), 2))
+        state = fold(state, decision_events([decision], params))
+    columns = TrackColumns(state, state.next_track_number)
+    observed = {"trk-000001", "trk-000002"}
+    assert second_tracks(columns, observed, None, params.association) == {
+        "trk-000001": "trk-000003"
+    }
 
 
 def test_a_piece_of_a_matched_object_lends_no_identity_to_a_missing_one() -> None:

@@ -1,0 +1,349 @@
+"""The frame-level front end (section 3.3, "Type-specific association"): which track each
+grounded proposal is, for a batch's frames and for an inspection capture's view.
+
+Proposals match tracks by class compatibility, 3D distance < 0.8 m and appearance > 0.78,
+greedily one to one, then the unique-class fallback recovers tracks whose absence is
+established (`core/association.py` holds these kernels). A leftover piece of an object another
+proposal shows is set aside; so is, in a batch, a proposal matching a fine node the capture
+ledger holds. What no track explains is a new hypothesis. After the frames, a batch also
+re-identifies missing objects with hypotheses seen since, and names second tracks of one object.
+
+Its work is bounded by the tracks in play, not by the scene's history: retired hypotheses are
+not in the state's columns at all.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+import numpy.typing as npt
+
+from core.association import (
+    CandidatePool,
+    appearance_agrees,
+    associate,
+    fragments,
+    mutual_matches,
+)
+from core.belief import class_compatibility, class_distribution
+from core.fixture_step import FixtureBatch
+from core.fixtures import FixtureProposal
+from core.geometry import Proposal
+from core.params import AssociationParams, Params
+from core.rules import UpdateRules
+from core.state import SceneState, TrackArrays
+from core.visibility import BatchVisibility
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True, eq=False)
+class BatchAssociation:
+    """Which track each of a batch's proposals and fixture clusters is."""
+
+    observations: Mapping[str, tuple[Proposal, ...]]  # object track -> its proposals, in order
+    fixtures: Mapping[str, FixtureProposal]  # fixture track -> the cluster it explains
+    new_tracks: tuple[str, ...]  # new hypotheses in the order of their ids (fixtures first)
+    merged_fixtures: Mapping[str, str]  # a second fixture track -> the one it joins
+    reidentified: Mapping[str, tuple[str, float]]  # missing object -> (hypothesis, cosine)
+    duplicates: Mapping[str, str]  # a second object track -> the one it joins
+
+
+class TrackColumns:
+    """The tracks proposals may match: the state's live columns, then the hypotheses created
+    while the front end runs, with their latest centers. Class beliefs and appearance are
+    fetched lazily, once per track."""
+
+    def __init__(self, state: SceneState, first_number: int) -> None:
+        arrays = state.arrays
+        self.state = state
+        self.count = len(arrays.track_ids)  # rows of the state; later rows are new
+        self.ids = list(arrays.track_ids)
+        self.kinds = list(arrays.kinds)
+        self.centers = arrays.centers.copy()
+        self.row = {track_id: row for row, track_id in enumerate(self.ids)}
+        self.first_number = first_number
+        self.new_ids: list[str] = []
+        self.observations: dict[str, list[Proposal]] = {}
+        self._embeddings: dict[int, FloatArray | None] = {}
+        self._beliefs: dict[int, Mapping[str, float]] = {}
+
+    def pool(self, eligible: BoolArray | None, recoverable: BoolArray) -> CandidatePool:
+        """Every track in play; `eligible` and `recoverable` are over the state's rows."""
+        extra = len(self.ids) - self.count
+        if eligible is not None:
+            eligible = np.concatenate((eligible, np.ones(extra, dtype=np.bool_)))
+        recoverable = np.concatenate((recoverable, np.zeros(extra, dtype=np.bool_)))
+        return CandidatePool(
+            self.ids,
+            self.kinds,
+            self.class_belief_of,
+            self.centers,
+            self.embedding_of,
+            eligible,
+            recoverable,
+        )
+
+    def embedding_of(self, row: int) -> FloatArray | None:
+        """A track's appearance; one created here: its first proposal's."""
+        if row not in self._embeddings:
+            track = self.state.tracks.get(self.ids[row])
+            if track is not None:
+                self._embeddings[row] = track.embedding()
+            else:
+                self._embeddings[row] = self.observations[self.ids[row]][0].embedding
+        return self._embeddings[row]
+
+    def class_belief_of(self, row: int) -> Mapping[str, float]:
+        """A track's p_cls; one created here: its first proposal's class evidence."""
+        if row not in self._beliefs:
+            track = self.state.tracks.get(self.ids[row])
+            if track is not None:
+                self._beliefs[row] = track.class_probabilities()
+            else:
+                first = self.observations[self.ids[row]][0]
+                self._beliefs[row] = class_distribution(first.label, first.class_scores)
+        return self._beliefs[row]
+
+    def extent_of(self, track_id: str) -> FloatArray:
+        """A track's size: its visibility box, the union of its views (partial views give
+        partial boxes); one created here: its first proposal's extent."""
+        row = self.row[track_id]
+        if row < self.count:
+            extent: FloatArray = self.state.arrays.box_extents[row]
+            return extent
+        return self.observations[track_id][0].extent
+
+    def held_by_capture(self, track_id: str) -> bool:
+        """A fine node attached through the capture ledger (section 3.3)."""
+        row = self.row[track_id]
+        return row < self.count and bool(self.state.arrays.captured[row])
+
+    def new_track(self, proposal: Proposal) -> str:
+        """Identity for a proposal no track explains: a new hypothesis."""
+        track_id = f"trk-{self.first_number + len(self.new_ids):06d}"
+        self.new_ids.append(track_id)
+        self.row[track_id] = len(self.ids)
+        self.ids.append(track_id)
+        self.kinds.append(proposal.kind)
+        self.centers = np.vstack((self.centers, proposal.center[None, :]))
+        return track_id
+
+    def observe(self, track_id: str, proposal: Proposal) -> None:
+        """A proposal matched (or created) this track; later frames gate on its latest center."""
+        self.observations.setdefault(track_id, []).append(proposal)
+        self.centers[self.row[track_id]] = proposal.center
+
+
+def associate_frame(
+    columns: TrackColumns,
+    proposals: Sequence[Proposal],
+    recoverable: BoolArray,
+    eligible: BoolArray | None,
+    params: AssociationParams,
+    hold_captured: bool,
+) -> list[tuple[int, str]]:
+    """(proposal index, track) for each proposal of one frame that stands for an object.
+
+    A leftover piece of an object another proposal shows (an over-segmented mask) is set aside,
+    not taken for a new object; with `hold_captured`, so is a proposal matching a fine node the
+    capture ledger holds: only a capture of its fixture speaks of it (section 3.3).
+    """
+    matches = associate(
+        proposals,
+        columns.pool(eligible, recoverable),
+        params,
+        partial(fragments, proposals, size_of=columns.extent_of, params=params),
+    )
+    pieces = fragments(proposals, matches, columns.extent_of, params)
+    assigned = []
+    for j, proposal in enumerate(proposals):
+        if j in pieces or (hold_captured and j in matches and columns.held_by_capture(matches[j])):
+            continue
+        track_id = matches.get(j) or columns.new_track(proposal)
+        columns.observe(track_id, proposal)
+        assigned.append((j, track_id))
+    return assigned
+
+
+def associate_capture(
+    state: SceneState, proposals: Sequence[Proposal], params: Params
+) -> list[tuple[int, str]]:
+    """The front end on an inspection capture's view: (proposal index, track) of each child."""
+    columns = TrackColumns(state, state.next_track_number)
+    recoverable = state.arrays.published & _absent(state.arrays, frozenset(), columns, params)
+    return associate_frame(columns, proposals, recoverable, None, params.association, False)
+
+
+def associate_batch(
+    state: SceneState,
+    fixtures: FixtureBatch,
+    proposals: Sequence[Sequence[Proposal]],
+    visibility: BatchVisibility,
+    since: float,
+    params: Params,
+    rules: UpdateRules,
+) -> BatchAssociation:
+    """The front end over a batch's frames in order, then identities across the batch.
+
+    New fixture hypotheses take the first new ids, then objects in the order they appear.
+    """
+    arrays = state.arrays
+    first = state.next_track_number
+    new_fixtures = tuple(f"trk-{first + i:06d}" for i in range(len(fixtures.unexplained)))
+    columns = TrackColumns(state, first + len(new_fixtures))
+    eligible = _eligible(arrays, since, rules.identity_memory_s)
+    for frame_proposals, shown in zip(proposals, visibility.shown, strict=True):
+        recoverable = arrays.published & _absent(arrays, shown, columns, params)
+        associate_frame(columns, frame_proposals, recoverable, eligible, params.association, True)
+    absent = _absent(arrays, visibility.shown[-1], columns, params)
+    return BatchAssociation(
+        observations={t: tuple(p) for t, p in columns.observations.items()},
+        fixtures={
+            **dict(sorted(fixtures.observed.items())),
+            **dict(zip(new_fixtures, fixtures.unexplained, strict=True)),
+        },
+        new_tracks=(*new_fixtures, *columns.new_ids),
+        merged_fixtures=fixtures.merged,
+        reidentified=_reidentifications(columns, eligible, absent, params.association),
+        duplicates=second_tracks(columns, columns.observations, eligible, params.association),
+    )
+
+
+def _eligible(arrays: TrackArrays, since: float, memory: float | None) -> BoolArray | None:
+    """Without persistent identity: removed and long-unseen tracks cannot be matched."""
+    if memory is None:
+        return None
+    with np.errstate(invalid="ignore"):
+        recent = arrays.last_observed >= since - memory  # NaN (never seen): False
+    eligible: BoolArray = ~arrays.gone & recent
+    return eligible
+
+
+def _absent(
+    arrays: TrackArrays, shown: Collection[str], columns: TrackColumns, params: Params
+) -> BoolArray:
+    """Absence established: removed or demoted, or its place seen empty in enough batches
+    (this one counting once when it showed the place and no proposal matched the track)."""
+    seen_empty = np.zeros(len(arrays.track_ids), dtype=np.int64)
+    for track_id in shown:
+        if track_id not in columns.observations:
+            seen_empty[columns.row[track_id]] = 1
+    misses = arrays.visible_misses + seen_empty
+    absent: BoolArray = arrays.missing | (misses >= params.association.fallback_min_misses)
+    return absent
+
+
+def _reidentifications(
+    columns: TrackColumns, eligible: BoolArray | None, absent: BoolArray, params: AssociationParams
+) -> dict[str, tuple[str, float]]:
+    """Missing objects that are hypotheses seen since elsewhere: object -> (hypothesis,
+    appearance cosine).
+
+    The object: published, its absence established, not matched in this batch. The hypothesis:
+    an object track never published, not matched in this batch, last seen after the object
+    was. Their classes are compatible, and each is the other's best appearance match past the
+    gate, by the fallback margin over every other candidate on either side (a mug carried among
+    mugs keeps its identity; a mug still in place lends none). The work is bounded by the live
+    hypotheses, which retire when unseen.
+    """
+    if not (params.unique_class_fallback and params.reidentify_hypotheses):
+        return {}
+    arrays = columns.state.arrays
+    objects = (np.asarray(arrays.kinds) == "object") & ~arrays.captured
+    if eligible is not None:
+        objects &= eligible
+    for track_id in columns.observations:
+        row = columns.row[track_id]
+        if row < columns.count:
+            objects[row] = False
+    hypotheses = objects & arrays.unpublished_tentative & ~arrays.gone
+    if not hypotheses.any():
+        return {}
+    missing = np.flatnonzero(objects & arrays.published & absent)
+    if missing.size == 0:
+        return {}
+    # Only a hypothesis seen after some missing object was can be one of them.
+    with np.errstate(invalid="ignore"):
+        hypotheses &= arrays.last_observed > np.nanmin(arrays.last_observed[missing])
+
+    def cosine(h: int, m: int) -> float | None:
+        if not arrays.last_observed[m] < arrays.last_observed[h]:
+            return None  # the hypothesis was not seen after the object
+        if (
+            class_compatibility(columns.class_belief_of(h), columns.class_belief_of(m))
+            < params.min_class_compatibility
+        ):
+            return None
+        a, b = columns.embedding_of(h), columns.embedding_of(m)
+        return None if a is None or b is None or a.shape != b.shape else float(a @ b)
+
+    rows = np.flatnonzero(hypotheses).tolist()
+    return {
+        arrays.track_ids[m]: (arrays.track_ids[h], score)
+        for h, m, score in mutual_matches(rows, missing.tolist(), cosine, params)
+    }
+
+
+def second_tracks(
+    columns: TrackColumns,
+    observed: Collection[str],
+    eligible: BoolArray | None,
+    params: AssociationParams,
+) -> dict[str, str]:
+    """Second tracks of one object: a live track whose center lies inside the object box
+    (center and extent) of a track this batch matched (`observed`), or whose box holds that
+    track's center, of a compatible class and appearance, neither one missing; the younger one
+    -> the older (an unpublished one -> a published one)."""
+    arrays = columns.state.arrays
+    count = len(arrays.track_ids)
+    if not params.absorb_contained_tracks or count < 2:
+        return {}
+    live = ~arrays.gone & ~arrays.captured & ~arrays.missing
+    objects = live & (np.asarray(arrays.kinds) == "object")
+    if eligible is not None:  # a track association may not match is not one either
+        objects &= eligible
+    rows = np.flatnonzero(objects)
+    centers, half = arrays.centers[rows], arrays.extents[rows] / 2
+    widest = half[:, 0].max(initial=0.0)
+    merged: dict[str, str] = {}
+    for track_id in sorted(observed):
+        row = columns.row[track_id]
+        if row >= count or not objects[row] or track_id in merged:
+            continue
+        # x first (one axis over every candidate), then the whole test on the few left.
+        mine = arrays.extents[row] / 2
+        near = np.flatnonzero(
+            np.abs(centers[:, 0] - arrays.centers[row, 0]) <= max(mine[0], widest)
+        )
+        gap = np.abs(centers[near] - arrays.centers[row])
+        held = (gap <= mine).all(axis=1) | (gap <= half[near]).all(axis=1)
+        for other in rows[near[held]].tolist():
+            other_id = arrays.track_ids[other]
+            if other == row or other_id in observed or other_id in merged:
+                continue
+            if not _same_object(columns, row, other, params):
+                continue
+            keep, drop = sorted((track_id, other_id))  # ids grow with age
+            if arrays.published[columns.row[drop]] and not arrays.published[columns.row[keep]]:
+                keep, drop = drop, keep
+            if drop in merged.values():
+                continue  # it keeps another track this batch: no chain of merges
+            merged[drop] = keep
+            if drop == track_id:
+                break
+    return merged
+
+
+def _same_object(columns: TrackColumns, row: int, other: int, params: AssociationParams) -> bool:
+    compatible = (
+        class_compatibility(columns.class_belief_of(row), columns.class_belief_of(other))
+        >= params.min_class_compatibility
+    )
+    return compatible and appearance_agrees(
+        columns.embedding_of(row), columns.embedding_of(other), params.min_appearance_cosine
+    )
