@@ -22,15 +22,12 @@ voxels; other parameters (and a touched region too large for a local grid) re-cl
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
 
 from core.events import FixtureEvidence
 from core.fixtures import (
@@ -42,29 +39,14 @@ from core.fixtures import (
     dbscan_with_core,
     kept_voxels,
 )
+from core.local_clusters import Clusters, local_update, new_keys
 from core.params import FixtureParams
-from core.voxels import MASK, OFFSET, pack, unpack
+from core.voxels import pack, unpack
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
 Evidence = Sequence[tuple[IntArray, tuple[float, ...]]]  # per mask: sorted unique keys, scores
-
-# The local grid of one update holds at most this many cells (about 100 MB of int32 indices
-# at the limit); a batch whose neighbourhood spans more re-clusters the whole map instead.
-# An implementation bound, not a constant of the method: it changes the cost, not the result.
-MAX_GRID_CELLS = 24_000_000
-
-
-@dataclass(frozen=True, eq=False)
-class Clusters:
-    """DBSCAN of a map's kept voxels, per voxel (aligned with the map's keys) and per cluster."""
-
-    params: FixtureParams
-    kept: IntArray  # class index per voxel, -1 when the voxel is dropped
-    core: BoolArray
-    cluster: IntArray  # the cluster's name (its smallest core key) per voxel, -1 for none
-    summaries: Mapping[int, ClusterSummary]  # name -> summary
 
 
 def proposals_of(
@@ -174,7 +156,7 @@ class VoxelMap:
             return self
         touched, counts, sums = self.rows(evidence)
         keys, at = _with_keys(self.keys, touched)
-        _, where = _new_keys(self.keys, touched)
+        _, where = new_keys(self.keys, touched)
         new_counts = _inserted(self.counts, where, 0)
         new_sums = _inserted(self.sums.reshape(-1, sums.shape[1]), where, 0.0)
         new_counts[at] = counts
@@ -223,17 +205,9 @@ def evidence_of(event: FixtureEvidence) -> list[tuple[IntArray, tuple[float, ...
 
 def _with_keys(keys: IntArray, touched: IntArray) -> tuple[IntArray, IntArray]:
     """(keys with the touched ones added, in order; where each touched key is in them)."""
-    new, where = _new_keys(keys, touched)
+    new, where = new_keys(keys, touched)
     merged = np.insert(keys, where, new) if new.size else keys
     return merged, np.searchsorted(merged, touched)
-
-
-def _new_keys(keys: IntArray, touched: IntArray) -> tuple[IntArray, IntArray]:
-    """(the touched keys not in `keys`, where they go in them)."""
-    where = np.searchsorted(keys, touched)
-    present = where < keys.size
-    present[present] = keys[where[present]] == touched[present]
-    return touched[~present], where[~present]
 
 
 def _inserted(values: npt.NDArray[Any], where: IntArray, fill: Any) -> Any:
@@ -333,7 +307,7 @@ class MapUpdate:
                 None,
             )
         local = (
-            None if offsets is None else _local_update(before, old, touched, counts, sums, offsets)
+            None if offsets is None else local_update(before, old, touched, counts, sums, offsets)
         )
         if local is None:
             after = before.merged(evidence)
@@ -365,7 +339,7 @@ class MapUpdate:
         if self.after is not None:
             return self.after
         keys, at = _with_keys(before.keys, self.touched)
-        _, where = _new_keys(before.keys, self.touched)
+        _, where = new_keys(before.keys, self.touched)
         counts = _inserted(before.counts, where, 0)
         sums = _inserted(before.sums.reshape(-1, self.sums.shape[1]), where, 0.0)
         counts[at] = self.counts
@@ -379,195 +353,3 @@ class MapUpdate:
         kept[where], core[where], cluster[where] = self.kept, self.core, self.cluster
         after.cache["clusters"] = Clusters(self.params, kept, core, cluster, self.summaries)
         return after
-
-
-def _inside(voxels: IntArray, low: IntArray, high: IntArray) -> BoolArray:
-    """Whether each voxel key lies in the box [low, high]."""
-    inside: BoolArray = (voxels[:, 0] >= low[0]) & (voxels[:, 0] <= high[0])
-    for axis in (1, 2):
-        inside &= (voxels[:, axis] >= low[axis]) & (voxels[:, axis] <= high[axis])
-    return inside
-
-
-def _in_box(keys: IntArray, low: IntArray, high: IntArray) -> tuple[IntArray, IntArray]:
-    """(indices, voxel keys) of the map's voxels inside [low, high]: keys sort by x, then y,
-    then z, so each (x, y) row of the box is one run of the sorted keys."""
-    low = np.clip(low, -OFFSET, MASK - OFFSET)
-    high = np.clip(high, -OFFSET, MASK - OFFSET)
-    xs, ys = np.meshgrid(
-        np.arange(low[0], high[0] + 1), np.arange(low[1], high[1] + 1), indexing="ij"
-    )
-    rows = np.stack((xs.ravel(), ys.ravel()), axis=1)
-    starts = np.searchsorted(keys, pack(np.column_stack((rows, np.full(len(rows), low[2])))))
-    stops = np.searchsorted(
-        keys, pack(np.column_stack((rows, np.full(len(rows), high[2])))), side="right"
-    )
-    lengths = stops - starts
-    total = int(lengths.sum())
-    # The runs, concatenated: each index is its run's start plus its place in the run.
-    run_starts = np.repeat(starts - np.concatenate(([0], np.cumsum(lengths)[:-1])), lengths)
-    index: IntArray = run_starts + np.arange(total)
-    return index, unpack(keys[index])
-
-
-def _local_update(
-    before: VoxelMap,
-    old: Clusters,
-    touched: IntArray,
-    counts: IntArray,
-    sums: FloatArray,
-    offsets: IntArray,
-) -> tuple[IntArray, IntArray, BoolArray, IntArray, dict[int, ClusterSummary]] | None:
-    """The clusters near the touched voxels after the batch, or None when the local grid would
-    be too large."""
-    params = old.params
-    touched_kept, _scores, _margins = kept_voxels(counts, sums, params)
-    touched_voxels = unpack(touched)
-    reach = int(np.abs(offsets).max(initial=0))
-    # Box 1: the touched voxels, every voxel whose core flag may change (within eps of one)
-    # and their neighbours.
-    low1 = touched_voxels.min(axis=0) - 2 * reach
-    high1 = touched_voxels.max(axis=0) + 2 * reach
-    # Dirty: the clusters whose box meets box 1 (every cluster with a voxel in it, and maybe
-    # a few more), re-clustered whole.
-    names = np.fromiter(old.summaries, dtype=np.int64, count=len(old.summaries))
-    lows = np.array([s.low for s in old.summaries.values()], dtype=np.int64).reshape(-1, 3)
-    highs = np.array([s.high for s in old.summaries.values()], dtype=np.int64).reshape(-1, 3)
-    meets = np.all((lows <= high1) & (highs >= low1), axis=1)
-    dirty = np.sort(names[meets])
-    low2 = np.minimum(low1, lows[meets].min(axis=0, initial=OFFSET))
-    high2 = np.maximum(high1, highs[meets].max(axis=0, initial=-OFFSET))
-    # Box 2: those clusters and a margin of two neighbourhoods (borders around them).
-    low2, high2 = low2 - 2 * reach, high2 + 2 * reach
-    shape = high2 - low2 + 1 + 2  # one empty cell of padding on every side
-    if math.prod(shape.tolist()) > MAX_GRID_CELLS:
-        return None
-    index2, voxels2 = _in_box(before.keys, low2, high2)
-    # The local points: the map's voxels in box 2 and the new touched ones, in key order.
-    fresh, _ = _new_keys(before.keys, touched)
-    keys = np.concatenate((before.keys[index2], fresh))
-    order = np.argsort(keys, kind="stable")
-    keys = keys[order]
-    voxels = np.concatenate((voxels2, unpack(fresh)))[order]
-    old_index = np.concatenate((index2, np.full(fresh.size, -1, np.int64)))[order]
-    known = old_index >= 0
-    kept = np.full(keys.size, -1, np.int64)
-    kept[known] = old.kept[old_index[known]]
-    at_touched = np.searchsorted(keys, touched)
-    kept[at_touched] = touched_kept
-    old_core = np.zeros(keys.size, dtype=bool)
-    old_core[known] = old.core[old_index[known]]
-    old_cluster = np.full(keys.size, -1, np.int64)
-    old_cluster[known] = old.cluster[old_index[known]]
-    # A dense grid over box 2 (one empty cell of padding around): which local voxel is in a
-    # cell, and its class; neighbours are flat index offsets.
-    strides = np.array([shape[1] * shape[2], shape[2], 1], dtype=np.int64)
-    flat = (voxels - low2 + 1) @ strides
-    index_grid = np.full(int(math.prod(shape.tolist())), -1, dtype=np.int32)
-    index_grid[flat] = np.arange(keys.size, dtype=np.int32)
-    class_grid = np.full(index_grid.size, -1, dtype=np.int16)
-    class_grid[flat] = kept
-    steps = offsets @ strides
-
-    def same_class(points: IntArray, along: IntArray) -> tuple[IntArray, BoolArray]:
-        """(neighbour cells, whether each holds a voxel of the point's class) per point."""
-        cells = flat[points][:, None] + along[None, :]
-        same = (class_grid[cells] == kept[points][:, None]) & (kept[points] >= 0)[:, None]
-        return cells, same
-
-    # Core flags within eps of a touched voxel (and a little beyond): the degree counts the
-    # same-class voxels within eps, the voxel itself included.
-    near1 = _inside(voxels, low1 + reach, high1 - reach)
-    core = old_core.copy()
-    recount = np.flatnonzero(near1)
-    degree = same_class(recount, steps)[1].sum(axis=1)
-    core[recount] = (kept[recount] >= 0) & (degree >= params.dbscan_min_points)
-    # Re-cluster box 1 and the dirty clusters whole: components of their core voxels (each
-    # edge looked up once, along the offsets that point forward in the grid).
-    in_box1 = _inside(voxels, low1, high1)
-    region = in_box1 | np.isin(old_cluster, dirty)
-    seeds = np.flatnonzero(region & core)
-    cells, same = same_class(seeds, steps[steps > 0])
-    rows, columns = np.nonzero(same)
-    targets = index_grid[cells[rows, columns]].astype(np.int64)
-    linked = core[targets]
-    rows, targets = rows[linked], targets[linked]
-    if not region[targets].all():  # the core edges of the region stay inside it
-        raise AssertionError("fixture clusters: a core edge leaves the re-clustered region")
-    position = np.full(keys.size, -1, np.int64)
-    position[seeds] = np.arange(seeds.size)
-    # The edges as a sparse matrix, row by row (np.nonzero gave them in row order).
-    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows, minlength=seeds.size))))
-    graph = csr_matrix(
-        (np.ones(rows.size, dtype=np.int8), position[targets], indptr),
-        shape=(seeds.size, seeds.size),
-    )
-    _, component = connected_components(graph, directed=False)
-    cluster = old_cluster.copy()
-    cluster[region] = -1
-    if seeds.size:
-        _, first = np.unique(component, return_index=True)
-        cluster[seeds] = keys[seeds[first]][component]
-    # Borders: a kept voxel that is not core joins the cluster of smallest name among its core
-    # neighbours; every voxel but the outer layers of box 2 is recomputed.
-    inner = _inside(voxels, low2 + reach, high2 - reach)
-    borders = np.flatnonzero(inner & ~core & (kept >= 0))
-    if borders.size:
-        cells, same = same_class(borders, steps)
-        found = np.where(same, index_grid[cells], -1).astype(np.int64)
-        anchor = (found >= 0) & core[np.maximum(found, 0)]
-        names = np.where(anchor, cluster[np.maximum(found, 0)], np.iinfo(np.int64).max)
-        best = names.min(axis=1)
-        cluster[borders] = np.where(anchor.any(axis=1), best, -1)
-    cluster[kept < 0] = -1
-    # Summaries of every cluster whose members or rows changed.
-    changed = region | (cluster != old_cluster) | (core != old_core) | ~known
-    affected = np.union1d(old_cluster[changed], cluster[changed])
-    affected = affected[affected >= 0]
-    summaries = dict(old.summaries)
-    # Their members, in key order, grouped by cluster.
-    members = np.flatnonzero(np.isin(cluster, affected))
-    members = members[np.argsort(cluster[members], kind="stable")]
-    row_counts = np.zeros(keys.size, np.int64)
-    row_sums = np.zeros((keys.size, sums.shape[1]))
-    row_counts[known] = before.counts[old_index[known]]
-    row_sums[known] = before.sums[old_index[known]].reshape(-1, sums.shape[1])
-    row_counts[at_touched] = counts
-    row_sums[at_touched] = sums
-    member_counts, member_sums = row_counts[members], row_sums[members]
-    _kept, member_scores, member_margins = kept_voxels(member_counts, member_sums, params)
-    starts = np.searchsorted(cluster[members], affected)
-    stops = np.searchsorted(cluster[members], affected, side="right")
-    dirty_set = set(dirty.tolist())
-    for name, start, stop in zip(affected.tolist(), starts.tolist(), stops.tolist(), strict=True):
-        rows = members[start:stop]
-        if name in dirty_set or name not in old.summaries:
-            # Re-clustered here: every member is a local voxel.
-            if start == stop:
-                summaries.pop(name, None)  # the cluster is no more
-                continue
-            part = slice(start, stop)
-            summaries[name] = cluster_summary(
-                int(kept[rows[0]]),
-                keys[rows],
-                member_counts[part],
-                member_sums[part],
-                member_scores[part],
-                member_margins[part],
-                params,
-            )
-            continue
-        # A cluster outside the re-clustered region whose borders changed: its members beyond
-        # box 2 are as they were.
-        outside = np.flatnonzero(old.cluster == name)
-        outside = outside[~np.isin(outside, index2)]
-        all_keys = np.concatenate((keys[rows], before.keys[outside]))
-        all_counts = np.concatenate((row_counts[rows], before.counts[outside]))
-        all_sums = np.concatenate((row_sums[rows], before.sums[outside].reshape(-1, sums.shape[1])))
-        order = np.argsort(all_keys, kind="stable")
-        all_keys, all_counts, all_sums = all_keys[order], all_counts[order], all_sums[order]
-        all_kept, all_scores, all_margins = kept_voxels(all_counts, all_sums, params)
-        summaries[name] = cluster_summary(
-            int(all_kept[0]), all_keys, all_counts, all_sums, all_scores, all_margins, params
-        )
-    return keys, kept, core, cluster, summaries

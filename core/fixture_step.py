@@ -6,17 +6,19 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 from core.events import FixtureEvidence
-from core.fixtures import (
-    FixtureProposal,
+from core.fixture_association import (
     FixtureTrackView,
-    VoxelEvidence,
     associate_fixtures,
     compatible,
-    fixture_proposals,
     holds,
+    same_place,
+)
+from core.fixtures import (
+    FixtureProposal,
+    VoxelEvidence,
+    fixture_proposals,
     kept_voxels,
     merged_voxels,
-    same_place,
     voxel_evidence,
 )
 from core.observation import Batch

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -167,40 +167,10 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
         return make("explore", "the robot is not in known free space: turn in place to observe")
     navigation = Navigation(state.occupancy, geometry, robot, params.planner)
     failed = state.plan.failed_views
-    deferred: list[Deferral] = []
-    lock = state.plan.lock
     by_id = {f.track_id: f for f in unresolved}
-    replaces = None
-    if lock is not None and lock.fixture_id in by_id:
-        fixture = by_id[lock.fixture_id]
-        held = candidate(state, fixture, robot)
-        view = best_view(
-            navigation,
-            fixture,
-            failed.get(fixture.track_id, ()),
-            params.planner,
-            only=(lock.view.x, lock.view.y),
-        )
-        if view is not None:
-            return make(
-                "inspect",
-                "the locked target, its view still feasible",
-                target=Target(held, view),
-                lock="held",
-            )
-        view = best_view(navigation, fixture, failed.get(fixture.track_id, ()), params.planner)
-        if view is not None:
-            return make(
-                "inspect",
-                "the locked target, from a new view (the locked one is no longer feasible)",
-                target=Target(held, view),
-                lock="new",
-                replaces=fixture.track_id,
-            )
-        deferred.append(Deferral(fixture.track_id, "no_feasible_view"))
-        replaces = fixture.track_id
-    elif lock is not None:
-        replaces = lock.fixture_id  # completed, rejected or removed: the lock is void
+    locked, deferred, replaces = _locked_plan(state, navigation, by_id, robot, make)
+    if locked is not None:
+        return locked
 
     def first_feasible(entries: Iterable[Candidate], reason: str) -> Plan | None:
         """Lock the first of `entries` with a feasible view; defer the others on the way."""
@@ -250,6 +220,41 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
         "no fixture with a feasible view and no reachable frontier",
         deferred=tuple(deferred),
     )
+
+
+def _locked_plan(
+    state: SceneState,
+    navigation: Navigation,
+    by_id: Mapping[str, Track],
+    robot: ViewPose,
+    make: Callable[..., Plan],
+) -> tuple[Plan | None, list[Deferral], str | None]:
+    """The locked target while it has a feasible view (the locked one, else a new one):
+    (that plan, or None with the lock deferred; the fixture of the lock a new one replaces)."""
+    lock, failed, params = state.plan.lock, state.plan.failed_views, state.params
+    if lock is None:
+        return None, [], None
+    if lock.fixture_id not in by_id:
+        return None, [], lock.fixture_id  # completed, rejected or removed: the lock is void
+    fixture = by_id[lock.fixture_id]
+    held = candidate(state, fixture, robot)
+    only = (lock.view.x, lock.view.y)
+    view = best_view(
+        navigation, fixture, failed.get(fixture.track_id, ()), params.planner, only=only
+    )
+    if view is not None:
+        reason = "the locked target, its view still feasible"
+        return make("inspect", reason, target=Target(held, view), lock="held"), [], None
+    view = best_view(navigation, fixture, failed.get(fixture.track_id, ()), params.planner)
+    if view is not None:
+        reason = "the locked target, from a new view (the locked one is no longer feasible)"
+        target = Target(held, view)
+        return (
+            make("inspect", reason, target=target, lock="new", replaces=fixture.track_id),
+            [],
+            None,
+        )
+    return None, [Deferral(fixture.track_id, "no_feasible_view")], fixture.track_id
 
 
 def _beside_the_map(state: SceneState, geometry: MapGeometry, robot: ViewPose) -> bool:

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from core.fixtures import FixtureProposal, ema_center, footprint_of
+from core.fixture_association import footprint_of
+from core.fixtures import FixtureProposal, ema_center
 from core.geometry import Proposal
 from core.graph import is_published
 from core.params import FixtureParams, Params

@@ -100,6 +100,12 @@ def test_inspection_grounds_children_on_the_fixture_only() -> None:
     assert labels == ["book", "mug"]
     assert all(after.tracks[c].parent == table.track_id for c in record.details()["children"])
     assert after.tracks[table.track_id].inspection_status == "completed"
+    # Each event states its track's lifecycle after it: a child the capture publishes is
+    # confirmed by the time its support edge is recorded.
+    assert any(e.type == "reparent" for e in events)
+    for count, event in enumerate(events, start=1):
+        assert event.track_id is not None
+        assert fold(state, events[:count]).tracks[event.track_id].lifecycle == event.state
 
 
 def test_inspection_refuses_what_is_not_a_confirmed_fixture() -> None:

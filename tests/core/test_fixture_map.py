@@ -8,18 +8,21 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core.fixture_map import VoxelMap, full_clusters, neighbour_offsets
-from core.fixtures import (
-    FixtureProposal,
+from core.fixture_association import (
     FixtureTrackView,
-    VoxelEvidence,
     absorbs,
     associate_fixtures,
     eligible_distance,
+)
+from core.fixture_map import VoxelMap, full_clusters, neighbour_offsets
+from core.fixtures import (
+    FixtureProposal,
+    VoxelEvidence,
     fixture_proposals,
     kept_voxels,
     merged_voxels,
 )
+from core.local_clusters import Clusters
 from core.masks import Mask
 from core.params import FixtureParams
 from core.voxels import pack

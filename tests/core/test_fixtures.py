@@ -11,7 +11,8 @@ import numpy as np
 from core.decide import decide
 from core.events import Event, FixtureAdded, TrackReparented, TrackRetired
 from core.evolve import fold
-from core.fixtures import FixtureProposal, FixtureTrackView, associate_fixtures, dbscan, kept_voxels
+from core.fixture_association import FixtureTrackView, associate_fixtures
+from core.fixtures import FixtureProposal, dbscan, kept_voxels
 from core.observation import Batch
 from core.params import FixtureParams
 from core.state import SceneState, Track
