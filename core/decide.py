@@ -37,7 +37,8 @@ def decide(
     proposals = ground_frames(batch.frames, params)
     # 3. Visibility gate V_i(t) of equation (3): samples of each stored box in range, inside
     #    the image, with valid depth in a 5x5 window and d_meas + 0.15 m >= d_expected; at
-    #    least two must pass (section 3.3).
+    #    least two must pass (section 3.3). Before association: the fallback lends only an
+    #    identity whose absence is established, which this batch's views may establish.
     visibility = batch_visibility(state, batch.frames, params, rules)
     # 4. Association, frame by frame: class compatibility, 3D distance < 0.8 m, appearance
     #    cosine > 0.78, greedy 1:1, then the unique-class fallback for tracks whose absence is
