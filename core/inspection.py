@@ -24,7 +24,7 @@ from core.masks import Mask, mask_iou
 from core.observation import Frame
 from core.params import Params
 from core.state import SceneState, Track
-from core.support import SupportSurface, support_of
+from core.support import SupportSurface, parents_of
 from core.values import InspectionStatus, ViewPose
 from core.visibility import Sighting, observable, samples_passed
 
@@ -147,12 +147,9 @@ def _attach_children(
     surface = [SupportSurface(fixture.track_id, fixture.center, fixture.extent)]
     proposals = ground_frame(frame, params)
     masks = [frame.detections[p.detection_index].mask for p in proposals]
-    chosen = [
-        proposals[i]
-        for i in suppress(proposals, masks, params)
-        if support_of(proposals[i].center, proposals[i].bottom_z, surface, params.fixtures)
-        == fixture.track_id
-    ]
+    kept = [proposals[i] for i in suppress(proposals, masks, params)]
+    parents = parents_of(kept, surface, params.fixtures)
+    chosen = [p for p, parent in zip(kept, parents, strict=True) if parent == fixture.track_id]
     # 3. Association: the frame-level front end (section 3.3).
     assigned = associate_capture(state, chosen, params)
     children = [track_id for _, track_id in assigned]

@@ -110,8 +110,13 @@ def support_parents(
         is not None
     ]
     return {
-        track_id: tuple(
-            support_of(p.center, p.bottom_z, surfaces, params.fixtures) for p in proposals
-        )
+        track_id: parents_of(proposals, surfaces, params.fixtures)
         for track_id, proposals in observations.items()
     }
+
+
+def parents_of(
+    proposals: Sequence[Proposal], surfaces: Sequence[SupportSurface], params: FixtureParams
+) -> tuple[str | None, ...]:
+    """The support parent of each proposal among `surfaces` (None: on nothing known)."""
+    return tuple(support_of(p.center, p.bottom_z, surfaces, params) for p in proposals)
