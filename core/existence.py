@@ -62,19 +62,12 @@ def existence_updates(
         else object_sighting(None, track_id, observations[track_id], parents[track_id], params)
         for track_id in association.new_tracks
     ]
-    skipped = {
-        *association.new_tracks,
-        *association.merged_fixtures,
-        *association.reidentified,
-        *(hypothesis for hypothesis, _ in association.reidentified.values()),
-    }
+    skipped = association.settled
     existing: dict[str, ObjectSighting | FixtureSighting | Miss] = {}
     for track_id, proposal in fixtures.items():
-        update = (
-            fixture_sighting(tracks[track_id], proposal, last_frame, timestamp, params)
-            if track_id not in skipped
-            else None
-        )
+        if track_id in skipped:
+            continue
+        update = fixture_sighting(tracks[track_id], proposal, last_frame, timestamp, params)
         if update is not None:  # a fixture a verifier rejected explains its cluster, unchanged
             existing[track_id] = update
     for track_id, proposals in observations.items():

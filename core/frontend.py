@@ -52,6 +52,19 @@ class BatchAssociation:
     reidentified: Mapping[str, tuple[str, float]]  # missing object -> (hypothesis, cosine)
     duplicates: Mapping[str, str]  # a second object track -> the one it joins
 
+    @property
+    def settled(self) -> frozenset[str]:
+        """Tracks the batch settles apart from sightings and misses: its new hypotheses, second
+        fixture tracks merged away, and both sides of each re-identification."""
+        return frozenset(
+            (
+                *self.new_tracks,
+                *self.merged_fixtures,
+                *self.reidentified,
+                *(hypothesis for hypothesis, _ in self.reidentified.values()),
+            )
+        )
+
 
 class TrackColumns:
     """The tracks proposals may match: the state's live columns, then the hypotheses created

@@ -138,12 +138,7 @@ def lifecycle_decisions(
     decisions = [update_decision(None, update, params) for update in updates.new]
     sighted = {*association.observations, *association.fixtures}
     stale = stale_hypotheses(state, sighted, timestamp, params)
-    skipped = {
-        *association.new_tracks,
-        *association.merged_fixtures,
-        *association.reidentified,
-        *(hypothesis for hypothesis, _ in association.reidentified.values()),
-    }
+    skipped = association.settled
     for track_id in sorted((updates.existing.keys() | stale) - skipped):
         track = tracks[track_id]
         update = updates.existing.get(track_id)
