@@ -51,19 +51,9 @@ class BatchAssociation:
     merged_fixtures: Mapping[str, str]  # a second fixture track -> the one it joins
     reidentified: Mapping[str, tuple[str, float]]  # missing object -> (hypothesis, cosine)
     duplicates: Mapping[str, str]  # a second object track -> the one it joins
-
-    @property
-    def settled(self) -> frozenset[str]:
-        """Tracks the batch settles apart from sightings and misses: its new hypotheses, second
-        fixture tracks merged away, and both sides of each re-identification."""
-        return frozenset(
-            (
-                *self.new_tracks,
-                *self.merged_fixtures,
-                *self.reidentified,
-                *(hypothesis for hypothesis, _ in self.reidentified.values()),
-            )
-        )
+    # Tracks the batch settles apart from sightings and misses: its new hypotheses, second
+    # fixture tracks merged away, and both sides of each re-identification.
+    settled: frozenset[str]
 
 
 class TrackColumns:
@@ -214,16 +204,21 @@ def associate_batch(
         recoverable = arrays.published & _absent(arrays, shown, columns, params)
         associate_frame(columns, frame_proposals, recoverable, eligible, params.association, True)
     absent = _absent(arrays, visibility.shown[-1], columns, params)
+    new_tracks = (*new_fixtures, *columns.new_ids)
+    reidentified = _reidentifications(columns, eligible, absent, params.association)
     return BatchAssociation(
         observations={t: tuple(p) for t, p in columns.observations.items()},
         fixtures={
             **dict(sorted(fixtures.observed.items())),
             **dict(zip(new_fixtures, fixtures.unexplained, strict=True)),
         },
-        new_tracks=(*new_fixtures, *columns.new_ids),
+        new_tracks=new_tracks,
         merged_fixtures=fixtures.merged,
-        reidentified=_reidentifications(columns, eligible, absent, params.association),
+        reidentified=reidentified,
         duplicates=second_tracks(columns, columns.observations, eligible, params.association),
+        settled=frozenset(
+            (*new_tracks, *fixtures.merged, *reidentified, *(h for h, _ in reidentified.values()))
+        ),
     )
 
 
