@@ -6,10 +6,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from core.fixture_map import Clusters
 from core.fixtures import (
     FixtureProposal,
 )
+from core.local_clusters import Clusters
 
 
 def same_proposals(a: Sequence[FixtureProposal], b: Sequence[FixtureProposal]) -> None:

@@ -22,7 +22,6 @@ from core.fixtures import (
     kept_voxels,
     merged_voxels,
 )
-from core.local_clusters import Clusters
 from core.masks import Mask
 from core.params import FixtureParams
 from core.voxels import pack
