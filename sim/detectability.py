@@ -188,6 +188,10 @@ class DetectorLuck:
             innovation
         )
 
+    def latent(self, key: str) -> float:
+        """The thing's latent this frame (N(0, 1) over a long run)."""
+        return float(self.state[self.index[key]])
+
     def passes(self, key: str, probability: float) -> bool:
         """Whether the thing is reported this frame, given its recall in this view."""
         return bool(ndtr(self.state[self.index[key]]) < probability)

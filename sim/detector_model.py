@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -20,17 +21,29 @@ from sim.appearance import AppearanceModel
 from sim.detectability import DetectorLuck, ViewFactors, box_view_factors, recall_probability
 from sim.detector import SimDetection
 from sim.detector_settings import DetectorSpec, correlation_per_frame
-from sim.fixture_segmenter import FixtureSegmenter, fixture_luck_keys
+from sim.fixture_segmenter import FixtureSegmenter, fixture_luck_keys, over_footprint
 from sim.masks import bleed, leak, partial, split
 from sim.phantoms import PHANTOM_PREFIX, phantom_view
 from sim.render import Render
 from sim.scenario_spec import Scenario
-from sim.spurious import false_positives
+from sim.spurious import false_positives, spurious_sites
 from sim.world import Box, World
 
 PERSON_PREFIX = "person-"  # object_id of a person detection: not a tracked object
 # A partial mask crops the object: this share of its instance and view parts turns into noise.
 PARTIAL_APPEARANCE_LOSS = 0.08
+SUPPORT_TOLERANCE_M = 0.03  # an object rests on a fixture whose top is this close to its bottom
+
+
+def support_of(box: Box, fixtures: Sequence[Box]) -> str:
+    """The fixture an object stands on (its top within 3 cm of the object's bottom, the object's
+    center over its footprint), else "floor": what a crop of the object shows around it."""
+    bottom = box.center[2] - box.size[2] / 2
+    for fixture in fixtures:
+        near = abs(fixture.top_z - bottom) < SUPPORT_TOLERANCE_M
+        if near and over_footprint(box.center[0], box.center[1], fixture):
+            return fixture.id
+    return "floor"
 
 
 def _object_frame_direction(box: Box, eye: np.ndarray) -> np.ndarray:
@@ -59,17 +72,25 @@ class RealisticDetector:
         self.appearance = AppearanceModel(self.spec.appearance, groups)
         self.detected_as = {person.id: person.detected_as for person in scenario.people}
         fixture_boxes = [spec.box() for spec in scenario.fixtures]
+        self.segmenter = None
         keys = [f"object/{spec.id}" for spec in scenario.objects]
         keys += [f"person/{person.id}" for person in scenario.people]
         keys += [f"phantom/{phantom.id}" for phantom in self.spec.phantoms]
-        keys += fixture_luck_keys(fixture_boxes)
+        if self.spec.fixtures is not None:
+            # The hallucination sites come first in the run's draws, before any latent.
+            sites = spurious_sites(
+                scenario.room_size,
+                fixture_boxes,
+                [spec.box() for spec in scenario.occluders],
+                self.spec.fixtures.spurious_per_m2,
+                rng,
+            )
+            self.segmenter = FixtureSegmenter(self.spec.fixtures, groups, fixture_boxes, sites)
+            keys += fixture_luck_keys(fixture_boxes, self.segmenter.pairs, len(sites))
         correlation = correlation_per_frame(
             self.spec.recall.miss_correlation_s, scenario.frame_period
         )
         self.luck = DetectorLuck(keys, correlation, rng)
-        self.segmenter = (
-            None if self.spec.fixtures is None else FixtureSegmenter(self.spec.fixtures, groups)
-        )
 
     def detect(
         self,
@@ -123,10 +144,10 @@ class RealisticDetector:
                 continue
             masks, cropped = self._object_masks(render.instance == index, surfaces, rng)
             direction = _object_frame_direction(box, eye)
+            place = support_of(box, world.fixtures)
             for mask in masks:
-                embedding = self.appearance.embed(
-                    box.id, box.label, direction, rng, PARTIAL_APPEARANCE_LOSS if cropped else 0.0
-                )
+                loss = PARTIAL_APPEARANCE_LOSS if cropped else 0.0
+                embedding = self.appearance.embed(box.id, box.label, direction, rng, loss, place)
                 label = self._reported_label(box.label, rng)
                 detections.append(
                     SimDetection(
@@ -181,8 +202,16 @@ class RealisticDetector:
     ) -> dict[str, float] | None:
         """An open-vocabulary detector's scores of the confusable classes (OWL-ViT and Grounding
         DINO score every prompt): the reported class first, its group close behind. Both the
-        true class and its confusions score high, so the scores hint at, not decide, the class."""
+        true class and its confusions score high, so the scores hint at, not decide, the class.
+
+        A label confused with a class outside the true class's group keeps the true group in
+        its scores only `labels.confusion_keeps_truth` of the time; otherwise the detector is
+        confidently wrong and scores the reported class's own group, as for an object of it.
+        """
+        keep = rng.random()  # drawn for every detection, so the stream stays aligned
         group = [true_label, *self.partners.get(true_label, [])]
+        if reported not in group and keep >= self.spec.labels.confusion_keeps_truth:
+            group = [reported, *self.partners.get(reported, [])]
         if len(group) < 2:
             return None
         scores = {reported: self.spec.score}

@@ -68,6 +68,9 @@ class LabelSpec:
     confusable: tuple[tuple[str, ...], ...] = ()  # groups of classes mistaken for one another
     flicker: float = 0.15  # per detection: another class of its confusable group
     confusion: float = 0.01  # per detection: any other object class of the scenario
+    # Share of those confusions whose class scores still carry the true class's group (the
+    # rest score the reported class's own group: confidently wrong).
+    confusion_keeps_truth: float = 0.25
 
 
 @dataclass(frozen=True)
@@ -75,16 +78,23 @@ class AppearanceSpec:
     """A CLIP-like appearance vector: shares of the squared norm (the rest is per-view noise)."""
 
     dim: int | None = 64  # None: the detector sends no embedding
-    class_share: float = 0.76  # common to every instance of a class
-    instance_share: float = 0.08  # this instance only
-    view_share: float = 0.10  # varies smoothly with the direction the object is seen from
+    class_share: float = 0.70  # common to every instance of a class
+    instance_share: float = 0.10  # this instance's look (a share of it its own, see below)
+    view_share: float = 0.09  # varies smoothly with the direction the object is seen from
+    context_share: float = 0.04  # what a crop shows around the object: common to one place
     shared_share: float = 0.50  # of a class vector: common to every class (CLIP's narrow cone)
     group_share: float = 0.35  # of a class vector: common to its confusable group
+    # Mean share of an instance part that is the look's own (the rest looks like its class):
+    # the overlap knob between one instance and another of its class (1: every look distinct).
+    distinctiveness: float = 0.5
+    noise_spread: float = 1.0  # log-normal spread of a detection's noise share (0: fixed)
+    look_alike: tuple[tuple[str, ...], ...] = ()  # groups of object ids that look the same
 
     @property
     def noise_share(self) -> float:
         """What is left for per-detection noise (crop, blur, mask errors)."""
-        return max(0.0, 1.0 - self.class_share - self.instance_share - self.view_share)
+        shares = self.class_share + self.instance_share + self.view_share + self.context_share
+        return max(0.0, 1.0 - shares)
 
 
 @dataclass(frozen=True)
@@ -112,7 +122,14 @@ class FixtureDetectorSpec:
     partial_keep: tuple[float, float] = (0.5, 0.9)
     bleed_rate: float = 0.2  # share of masks spilling into an adjacent fixture
     bleed_px: tuple[int, int] = (4, 12)
-    wrong_top_rate: float = 0.08  # share of views whose top class is a wrong one
+    wrong_top_rate: float = 0.10  # mean share of views whose top class is a wrong one
+    ambiguity_concentration: float = 5.0  # Beta concentration of that share per fixture (0: none)
+    merge_rate: float = 0.15  # share of views of two adjacent fixtures segmented as one mask
+    merge_gap_m: float = 0.20  # adjacent: footprints at most this far apart, tops level
+    split_rate: float = 0.10  # share of views of a long fixture segmented as two halves
+    split_min_length_m: float = 1.6  # long: a footprint side at least this long
+    spurious_per_m2: float = 0.05  # hallucination sites per square metre of floor
+    spurious_recall: float = 0.30  # share of views in which a site in view is reported
 
 
 @dataclass(frozen=True)
@@ -202,28 +219,36 @@ def _masks(value: Any, where: str) -> MaskSpec:
     return spec
 
 
-def _group(value: Any, where: str) -> tuple[str, ...]:
-    labels = tuple(sequence(value, where, text))
-    if len(labels) < 2 or len(set(labels)) != len(labels):
-        raise ScenarioError(f"{where}: a confusable group needs two or more distinct classes")
-    return labels
+def _disjoint_groups(value: Any, where: str, noun: str) -> tuple[tuple[str, ...], ...]:
+    """Groups of two or more distinct names, no name in two groups (confusable classes, looks)."""
+
+    def group(item: Any, at: str) -> tuple[str, ...]:
+        names = tuple(sequence(item, at, text))
+        if len(names) < 2 or len(set(names)) != len(names):
+            raise ScenarioError(f"{at}: a group needs two or more distinct {noun}")
+        return names
+
+    groups = tuple(sequence(value, where, group))
+    seen: dict[str, int] = {}
+    for index, members in enumerate(groups):
+        for name in members:
+            if name in seen:
+                raise ScenarioError(f"{where}[{index}]: {name!r} is already in group {seen[name]}")
+            seen[name] = index
+    return groups
 
 
 def _labels(value: Any, where: str) -> LabelSpec:
     section, default = Section(value, where), LabelSpec()
-    groups = tuple(section.get("confusable", lambda item, at: sequence(item, at, _group), []))
-    seen: dict[str, int] = {}
-    for index, group in enumerate(groups):
-        for label in group:
-            if label in seen:
-                raise ScenarioError(
-                    f"{where}.confusable[{index}]: {label!r} is already in group {seen[label]}"
-                )
-            seen[label] = index
     spec = LabelSpec(
-        confusable=groups,
+        confusable=section.get(
+            "confusable", lambda item, at: _disjoint_groups(item, at, "classes"), ()
+        ),
         flicker=section.get("flicker", fraction, default.flicker),
         confusion=section.get("confusion", fraction, default.confusion),
+        confusion_keeps_truth=section.get(
+            "confusion_keeps_truth", fraction, default.confusion_keeps_truth
+        ),
     )
     section.finish()
     return spec
@@ -238,12 +263,22 @@ def _appearance(value: Any, where: str) -> AppearanceSpec:
         class_share=section.get("class_share", fraction, default.class_share),
         instance_share=section.get("instance_share", fraction, default.instance_share),
         view_share=section.get("view_share", fraction, default.view_share),
+        context_share=section.get("context_share", fraction, default.context_share),
         shared_share=section.get("shared_share", fraction, default.shared_share),
         group_share=section.get("group_share", fraction, default.group_share),
+        distinctiveness=section.get("distinctiveness", fraction, default.distinctiveness),
+        noise_spread=section.get(
+            "noise_spread", lambda item, at: number(item, at, 0.0, 2.0), default.noise_spread
+        ),
+        look_alike=section.get(
+            "look_alike", lambda item, at: _disjoint_groups(item, at, "object ids"), ()
+        ),
     )
     section.finish()
-    if spec.class_share + spec.instance_share + spec.view_share > 1.0 + 1e-9:
-        raise ScenarioError(f"{where}.view_share: class, instance and view shares exceed 1")
+    if spec.class_share + spec.instance_share + spec.view_share + spec.context_share > 1 + 1e-9:
+        raise ScenarioError(
+            f"{where}.context_share: class, instance, view and context shares exceed 1"
+        )
     if spec.shared_share + spec.group_share > 1.0 + 1e-9:
         raise ScenarioError(f"{where}.group_share: shared and group shares exceed 1")
     return spec
@@ -292,6 +327,21 @@ def _fixture_detector(value: Any, where: str) -> FixtureDetectorSpec:
         bleed_rate=section.get("bleed_rate", fraction, default.bleed_rate),
         bleed_px=section.get("bleed_px", _pixel_pair, default.bleed_px),
         wrong_top_rate=section.get("wrong_top_rate", fraction, default.wrong_top_rate),
+        ambiguity_concentration=section.get(
+            "ambiguity_concentration",
+            lambda item, at: number(item, at, 0.0, 1000.0),
+            default.ambiguity_concentration,
+        ),
+        merge_rate=section.get("merge_rate", fraction, default.merge_rate),
+        merge_gap_m=section.get(
+            "merge_gap_m", lambda item, at: number(item, at, 0.0, 2.0), default.merge_gap_m
+        ),
+        split_rate=section.get("split_rate", fraction, default.split_rate),
+        split_min_length_m=section.get("split_min_length_m", positive, default.split_min_length_m),
+        spurious_per_m2=section.get(
+            "spurious_per_m2", lambda item, at: number(item, at, 0.0, 1.0), default.spurious_per_m2
+        ),
+        spurious_recall=section.get("spurious_recall", fraction, default.spurious_recall),
     )
     section.finish()
     return spec

@@ -69,3 +69,17 @@ def split(mask: np.ndarray, angle: float) -> tuple[np.ndarray, np.ndarray]:
     """The mask cut in two halves across direction `angle` (an over-segmented object)."""
     first = partial(mask, 0.5, angle)
     return first, mask & ~first
+
+
+def principal_angle(mask: np.ndarray) -> float:
+    """Direction (as `partial` takes it) of the mask's longest extent: split across it, a long
+    table comes apart into its two ends."""
+    if not mask.any():
+        return 0.0
+    rows, cols = np.nonzero(mask[bounding_slices(mask, 0)])
+    if rows.size < 2:
+        return 0.0
+    covariance = np.cov(np.vstack([cols, rows]).astype(np.float64))
+    values, vectors = np.linalg.eigh(covariance)
+    along = vectors[:, int(np.argmax(values))]
+    return math.atan2(float(along[1]), float(along[0]))

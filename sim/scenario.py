@@ -230,6 +230,13 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
     check_people(people, room_size, frames, taken)
     check_phantoms(detector.phantoms, room_size)
     fixture_ids = {spec.id for spec in fixtures}
+    object_ids = {spec.id for spec in objects}
+    for index, group in enumerate(detector.appearance.look_alike):
+        for object_id in group:
+            if object_id not in object_ids:
+                raise ScenarioError(
+                    f"detector.appearance.look_alike[{index}]: unknown object {object_id!r}"
+                )
     for fixture_id in (detector.fixtures.ambiguity or {}) if detector.fixtures else {}:
         if fixture_id not in fixture_ids:
             raise ScenarioError(f"detector.fixtures.ambiguity.{fixture_id}: unknown fixture")

@@ -33,6 +33,7 @@ FRONTAL = ViewFactors(
     pixels=3000, distance_m=1.0, grazing_deg=60.0, truncation=0.0, visible_fraction=1.0
 )
 SCENARIOS = REPO_ROOT / "sim" / "scenarios"
+GATE = 0.78  # the paper's appearance gate
 
 
 def test_recall_is_the_peak_for_a_near_frontal_whole_view_and_falls_with_each_factor() -> None:
@@ -115,7 +116,7 @@ def test_mask_errors_stay_where_they_belong() -> None:
 
 
 def test_cosines_of_the_appearance_model_are_clip_like() -> None:
-    """Same instance across views .80-.95, same class .70-.85, unrelated classes far below."""
+    """Same instance and same class overlap around the 0.78 gate; other classes far below."""
     scenario = load_scenario(SCENARIOS / "office.yaml", frames=40)
     run = simulate(scenario, seed=3)
     label_of = {obj.object_id: obj.label for obj in run.frames[0].truth.objects}
@@ -136,11 +137,12 @@ def test_cosines_of_the_appearance_model_are_clip_like() -> None:
             else:
                 other.append(cosine)
     same_range = np.percentile(same, [5, 95])
-    class_range = np.percentile(same_class, [5, 95])
-    assert same_range[0] >= 0.80 and same_range[1] <= 0.97
-    assert class_range[0] >= 0.68 and class_range[1] <= 0.86
+    assert 0.70 <= same_range[0] <= 0.80 and same_range[1] <= 0.98
+    # Some views of one instance fall below the gate, some other instances pass it.
+    assert 0.03 <= np.mean(np.array(same) < GATE) <= 0.2
+    assert 0.15 <= np.mean(np.array(same_class) > GATE) <= 0.55
     assert np.median(same) - np.median(same_class) > 0.08
-    assert np.percentile(other, 95) < 0.55
+    assert np.percentile(other, 95) < 0.6
 
 
 def _phantom_render(eye: tuple[float, float, float]) -> Render:

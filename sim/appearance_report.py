@@ -1,0 +1,182 @@
+"""The figures the appearance model gives: `python -m sim.appearance --report [--distinctiveness D]`.
+
+Random views of many instances of one class (mugs), of a confusable class (cups), of an unrelated
+class (books) and clutter blobs, embedded as the realistic detector embeds them (a share of the
+detections cropped by a partial mask). It prints cosine percentiles per kind of pair, how often
+the paper's 0.78 appearance gate is crossed the wrong way, and the choice between an object's own
+track and another same-class object's track for a new detection of the object (undecided when
+the two cosines are within the paper's 0.05 margin).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.appearance import AppearanceModel
+from sim.detector_settings import AppearanceSpec, MaskSpec
+
+GATE = 0.78  # the paper's appearance gate (section 3.3, "Type-specific association")
+MARGIN = 0.05  # the paper's fallback margin between the best and the second appearance match
+PARTIAL_LOSS = 0.08  # what a cropped mask moves to noise (`sim.detector_model`)
+INSTANCES = 40  # mugs (and 8 cups and 8 books) whose looks are drawn from the distribution
+VIEWS = 24  # random views per instance
+TRACK_VIEWS = 10  # detections averaged into a track's embedding (the paper averages by count)
+TRIALS = 2000
+PERCENTILES = (5, 25, 50, 75, 95)
+
+
+@dataclass(frozen=True)
+class Figures:
+    """Cosines per kind of pair, and the track choice tally."""
+
+    cosines: dict[str, np.ndarray]
+    # (right, wrong, undecided) for a detection at its own place, and carried to the other's
+    stays: tuple[int, int, int]
+    carried: tuple[int, int, int]
+
+
+def _direction(rng: np.random.Generator) -> np.ndarray:
+    """A robot's view of an object on furniture: any side, 5-35 degrees from above."""
+    azimuth, elevation = rng.uniform(0, 2 * math.pi), math.radians(rng.uniform(5, 35))
+    return np.array(
+        [
+            math.cos(elevation) * math.cos(azimuth),
+            math.cos(elevation) * math.sin(azimuth),
+            math.sin(elevation),
+        ]
+    )
+
+
+def _views(
+    model: AppearanceModel,
+    key: str,
+    label: str,
+    count: int,
+    rng: np.random.Generator,
+    place: str = "",
+) -> np.ndarray:
+    """`count` detections of one thing from random views at one place, a share of them cropped."""
+    cropped = MaskSpec().partial_rate + MaskSpec().split_rate
+    rows = []
+    for _ in range(count):
+        loss = PARTIAL_LOSS if rng.random() < cropped else 0.0
+        embedding = model.embed(key, label, _direction(rng), rng, loss, place or f"on/{key}")
+        assert embedding is not None
+        rows.append(embedding)
+    return np.array(rows)
+
+
+def _pairs(first: np.ndarray, second: np.ndarray | None = None) -> np.ndarray:
+    """Cosines of every pair of rows (within one set when `second` is None)."""
+    if second is None:
+        gram = first @ first.T
+        return np.asarray(gram[np.triu_indices(len(first), k=1)])
+    return np.asarray(first @ second.T).ravel()
+
+
+def _track(views: np.ndarray) -> np.ndarray:
+    """A track's appearance: its detections averaged, then unit-normalized (the paper's)."""
+    mean = np.asarray(views.mean(axis=0))
+    return np.asarray(mean / np.linalg.norm(mean))
+
+
+def measure(spec: AppearanceSpec, seed: int = 0) -> Figures:
+    """Every figure of the report for one appearance setting."""
+    mugs = [f"mug_{index}" for index in range(INSTANCES)]
+    # The last eight mugs come in look-alike pairs (four sets of two).
+    sets = tuple((mugs[i], mugs[i + 1]) for i in range(INSTANCES - 8, INSTANCES, 2))
+    model = AppearanceModel(dataclasses.replace(spec, look_alike=sets), [("cup", "mug")])
+    rng = np.random.default_rng(seed)
+    views = {key: _views(model, key, "mug", VIEWS, rng) for key in mugs}
+    cups = [_views(model, f"cup_{index}", "cup", VIEWS, rng) for index in range(8)]
+    books = [_views(model, f"book_{index}", "book", VIEWS, rng) for index in range(8)]
+    clutter = np.array([model.clutter(rng) for _ in range(VIEWS * 8)])
+    alike = {key for group in sets for key in group}
+    distinct = [key for key in mugs if key not in alike]
+    cosines = {
+        "same instance": np.concatenate([_pairs(views[key]) for key in mugs]),
+        "same class, other instance": np.concatenate(
+            [_pairs(views[a], views[b]) for i, a in enumerate(distinct) for b in distinct[i + 1 :]]
+        ),
+        "look-alike pair": np.concatenate([_pairs(views[a], views[b]) for a, b in sets]),
+        "confusable class (mug-cup)": np.concatenate(
+            [_pairs(views[mugs[i]], cup) for i, cup in enumerate(cups)]
+        ),
+        "unrelated class (mug-book)": np.concatenate(
+            [_pairs(views[mugs[i]], book) for i, book in enumerate(books)]
+        ),
+        "clutter (mug-blob)": _pairs(np.concatenate([views[key] for key in mugs[:8]]), clutter),
+    }
+    return Figures(
+        cosines, _choices(model, distinct, rng, False), _choices(model, distinct, rng, True)
+    )
+
+
+def _choices(
+    model: AppearanceModel, keys: Sequence[str], rng: np.random.Generator, carried: bool
+) -> tuple[int, int, int]:
+    """Right, wrong and undecided choices between a detection's own track and another's.
+
+    Each track averages detections taken where its object stands; the new detection is taken
+    there too, or (`carried`) where the other object stood when its track was built.
+    """
+    right = wrong = 0
+    for _ in range(TRIALS):
+        own, other = (keys[i] for i in rng.choice(len(keys), size=2, replace=False))
+        own_track = _track(_views(model, own, "mug", TRACK_VIEWS, rng))
+        other_track = _track(_views(model, other, "mug", TRACK_VIEWS, rng))
+        place = f"on/{other}" if carried else f"on/{own}"
+        detection = _views(model, own, "mug", 1, rng, place)[0]
+        lead = float(detection @ own_track - detection @ other_track)
+        right += lead > MARGIN
+        wrong += lead < -MARGIN
+    return right, wrong, TRIALS - right - wrong
+
+
+def render(figures: Figures, title: str) -> list[str]:
+    """The report's lines for one setting."""
+    lines = [title, f"{'pairs':32s} " + " ".join(f"p{p:<5d}" for p in PERCENTILES) + "  gate"]
+    for name, values in figures.cosines.items():
+        cells = " ".join(f"{v:.3f} " for v in np.percentile(values, PERCENTILES))
+        crossed = (values < GATE).mean() if name == "same instance" else (values > GATE).mean()
+        side = "below" if name == "same instance" else "above"
+        lines.append(f"{name:32s} {cells} {100 * crossed:5.1f}% {side} {GATE}")
+    for name, (right, wrong, undecided) in (
+        ("seen where its track was built", figures.stays),
+        ("carried to where the other's was built", figures.carried),
+    ):
+        lines.append(
+            f"own vs another mug's track, {name}: {right:,} right, {wrong:,} wrong, "
+            f"{undecided:,} undecided of {TRIALS:,} ({TRACK_VIEWS}-view tracks, margin {MARGIN})"
+        )
+    return lines
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="python -m sim.appearance", description=__doc__)
+    parser.add_argument("--report", action="store_true", help="print the appearance figures")
+    parser.add_argument(
+        "--distinctiveness",
+        type=float,
+        nargs="*",
+        default=[],
+        help="also report these values of detector.appearance.distinctiveness",
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args(argv)
+    if not args.report:
+        parser.error("nothing to do: pass --report")
+    default = AppearanceSpec()
+    settings = [("defaults", default)]
+    settings += [
+        (f"distinctiveness {value}", dataclasses.replace(default, distinctiveness=value))
+        for value in args.distinctiveness
+    ]
+    for name, spec in settings:
+        print("\n".join(render(measure(spec, args.seed), f"\n{name}:")))
