@@ -3,9 +3,11 @@
 Per frame, in a fixed order: every latent of the detector's luck advances; each visible object
 is reported with its viewpoint recall (`sim.detectability`), its mask bleeds onto its support,
 leaks, or covers only a part or is split in two (`sim.masks`), its label may flicker to a
-confusable class, and its embedding is CLIP-like (`sim.appearance`); people are reported when
-the scenario says as what; phantoms (posters, reflections) are reported from their cone of
-views; fixtures go through the open-vocabulary segmenter (`sim.fixture_segmenter`); and random
+confusable class or be confused with any other (its class scores then often confidently wrong),
+and its embedding is CLIP-like, overlapping other instances of its class (`sim.appearance`);
+people are reported when the scenario says as what; phantoms (posters, reflections) are
+reported from their cone of views; fixtures go through the open-vocabulary segmenter
+(`sim.fixture_segmenter`: per-view scores, merged, split and hallucinated masks); and random
 false-positive blobs land on visible surfaces (`sim.spurious`).
 """
 
@@ -156,7 +158,7 @@ class RealisticDetector:
                         self.spec.score,
                         mask,
                         embedding,
-                        class_scores=self._class_scores(box.label, label, rng),
+                        class_scores=self.class_scores(box.label, label, rng),
                     )
                 )
         return detections
@@ -197,7 +199,7 @@ class RealisticDetector:
             return others[int(pick * len(others))]
         return label
 
-    def _class_scores(
+    def class_scores(
         self, true_label: str, reported: str, rng: np.random.Generator
     ) -> dict[str, float] | None:
         """An open-vocabulary detector's scores of the confusable classes (OWL-ViT and Grounding

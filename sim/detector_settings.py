@@ -1,9 +1,10 @@
 """The `detector:` section of a scenario: every error mode of the simulated detector, each a setting.
 
 The defaults are the realistic detector (`sim/scenarios/README.md` gives the figures and the
-reasons); a scenario only writes what is particular to its world (confusable classes, phantoms).
-Setting each mode to its kind value (recall 1.0, rates 0, `appearance: {class_share: 0, ...}`)
-gives back the oracle detector of the first evaluation.
+reasons); a scenario only writes what is particular to its world (confusable classes, phantoms,
+look-alike objects). Setting each mode to its kind value (recall 1.0, rates 0,
+`confusion_keeps_truth: 1`, `spurious_per_m2: 0`) gives back the near-oracle detector of the
+first evaluation; the README's "Oracle" paragraph lists them, the appearance model of before too.
 """
 
 from __future__ import annotations

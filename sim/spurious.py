@@ -4,6 +4,7 @@ the places a fixture segmenter keeps hallucinating furniture (spurious fixture s
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -230,19 +231,29 @@ def spurious_sites(
 
 
 def _image_window(region: Box, render: Render) -> tuple[slice, slice] | None:
-    """Rows and columns of the image the region can show in (None: out of view)."""
+    """Rows and columns of the image the region can show in (None: out of view).
+
+    The box's edges are clipped to the plane in front of the camera first, so a rug the camera
+    stands on projects to the part of the image it can fill, not to the whole image.
+    """
     camera, pose = render.camera, render.pose
     half = np.divide(region.size, 2)
-    corners = np.array(region.center) + half * np.array(
-        [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
-    )
-    local = (corners - pose[:3, 3]) @ pose[:3, :3]
-    if (local[:, 2] <= camera.min_depth / 2).all():
-        return None  # wholly behind the camera
-    if (local[:, 2] <= camera.min_depth / 2).any():
-        return slice(0, camera.height), slice(0, camera.width)  # straddles it: look everywhere
-    cols = camera.fx * local[:, 0] / local[:, 2] + camera.cx
-    rows = camera.fy * local[:, 1] / local[:, 2] + camera.cy
+    signs = [(x, y, z) for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+    local = (np.array(region.center) + half * np.array(signs) - pose[:3, 3]) @ pose[:3, :3]
+    near = camera.min_depth / 2
+    points = [corner for corner in local if corner[2] > near]
+    for i, j in itertools.combinations(range(8), 2):
+        if sum(a != b for a, b in zip(signs[i], signs[j], strict=True)) != 1:
+            continue  # not an edge of the box
+        first, second = local[i], local[j]
+        if (first[2] - near) * (second[2] - near) < 0:  # the edge crosses the plane
+            along = (near - first[2]) / (second[2] - first[2])
+            points.append(first + along * (second - first))
+    if not points:
+        return None
+    front = np.array(points)
+    cols = camera.fx * front[:, 0] / front[:, 2] + camera.cx
+    rows = camera.fy * front[:, 1] / front[:, 2] + camera.cy
     left, right = max(int(cols.min()), 0), min(math.ceil(cols.max()) + 1, camera.width)
     top, bottom = max(int(rows.min()), 0), min(math.ceil(rows.max()) + 1, camera.height)
     if left >= right or top >= bottom:
@@ -259,24 +270,18 @@ def _region_mask(region: Box, render: Render, background: np.ndarray) -> np.ndar
     camera, pose = render.camera, render.pose
     low = np.subtract(region.center, np.divide(region.size, 2))
     high = np.add(region.center, np.divide(region.size, 2))
-    # Heights first (separable in rows and columns), then x and y of the pixels at the height.
     ray_x = (np.arange(cols.start, cols.stop) - camera.cx) / camera.fx
     ray_y = (np.arange(rows.start, rows.stop) - camera.cy) / camera.fy
     depth = render.depth[rows, cols]
-    height = depth * (pose[2, 0] * ray_x[None, :] + pose[2, 1] * ray_y[:, None] + pose[2, 2])
-    height += pose[2, 3]
-    candidate = background[rows, cols] & (height >= low[2]) & (height <= high[2])
-    row_index, col_index = np.nonzero(candidate)
-    if row_index.size == 0:
-        return None
-    hit = depth[row_index, col_index]
-    local = np.stack([ray_x[col_index] * hit, ray_y[row_index] * hit, hit], axis=-1)
-    planar = local @ pose[:2, :3].T + pose[:2, 3]
-    inside = np.all((planar >= low[:2]) & (planar <= high[:2]), axis=-1)
-    if not inside.any():
-        return None
+    inside = background[rows, cols].copy()
+    for axis in (2, 0, 1):  # world z, x, y: each separable in rows and columns
+        slope = pose[axis, 0] * ray_x[None, :] + pose[axis, 1] * ray_y[:, None] + pose[axis, 2]
+        coordinate = depth * slope + pose[axis, 3]
+        inside &= (coordinate >= low[axis]) & (coordinate <= high[axis])
+        if not inside.any():
+            return None
     mask = np.zeros_like(background)
-    mask[row_index[inside] + rows.start, col_index[inside] + cols.start] = True
+    mask[rows, cols] = inside
     return mask
 
 

@@ -192,7 +192,13 @@ def test_the_fixture_segmenter_cuts_bleeds_and_sometimes_puts_a_partner_on_top()
     world = World(room_size=(4.0, 4.0, 2.5), fixtures=(table, desk), objects=())
     view = render(world, CAMERA, look_at((1.6, 0.2, 1.4), (1.6, 2.0, 0.6)))
     spec = FixtureDetectorSpec(
-        recall=1.0, partial_rate=0.5, bleed_rate=0.5, wrong_top_rate=0.3, score_noise=0.0
+        recall=1.0,
+        partial_rate=0.5,
+        bleed_rate=0.5,
+        wrong_top_rate=0.3,
+        ambiguity_concentration=0.0,  # both fixtures equally ambiguous
+        merge_rate=0.0,
+        score_noise=0.0,
     )
     segmenter = FixtureSegmenter(spec, [("desk", "table")])
     rng = np.random.default_rng(2)
