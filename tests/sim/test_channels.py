@@ -35,6 +35,16 @@ from sim.world import Box, World
 CAMERA = CameraModel()
 SCENARIOS = REPO_ROOT / "sim" / "scenarios"
 # Every fixture error at its kind value: one exact mask per visible fixture, true class on top.
+KIND_FIELDS = (
+    "recall",
+    "score_noise",
+    "partial_rate",
+    "bleed_rate",
+    "wrong_top_rate",
+    "merge_rate",
+    "split_rate",
+    "spurious_per_m2",
+)
 KIND_FIXTURES = FixtureDetectorSpec(
     recall=1.0,
     score_noise=0.0,
@@ -305,16 +315,7 @@ def test_a_site_in_view_is_reported_in_its_share_of_views() -> None:
 
 
 def test_the_kind_fixture_setting_gives_one_exact_mask_per_fixture_with_its_class_on_top() -> None:
-    kind = {
-        "recall": 1.0,
-        "score_noise": 0.0,
-        "partial_rate": 0,
-        "bleed_rate": 0,
-        "wrong_top_rate": 0,
-        "merge_rate": 0,
-        "split_rate": 0,
-        "spurious_per_m2": 0,
-    }
+    kind = {name: getattr(KIND_FIXTURES, name) for name in KIND_FIELDS}
     scenario = load_scenario(
         SCENARIOS / "bedroom.yaml", {"detector": {"fixtures": kind}}, frames=12
     )
