@@ -19,7 +19,7 @@ do (`sim/scenarios/README.md`, "Appearance figures"):
 
 Objects of one look-alike group (`look_alike`, two mugs of one set) share one look: their
 instance and view parts are the same, only the noise of each detection tells them apart.
-`python -m sim.appearance --report` prints the figures these settings give.
+`python -m sim.appearance_report` prints the figures these settings give.
 """
 
 from __future__ import annotations
@@ -180,9 +180,3 @@ class AppearanceModel:
                 (1.0 - shared, noise / np.linalg.norm(noise)),
             ]
         )
-
-
-if __name__ == "__main__":
-    from sim.appearance_report import main
-
-    main()

@@ -1,4 +1,4 @@
-"""The figures the appearance model gives: `python -m sim.appearance --report [--distinctiveness D]`.
+"""The figures the appearance model gives: `python -m sim.appearance_report [--distinctiveness D]`.
 
 Random views of many instances of one class (mugs), of a confusable class (cups), of an unrelated
 class (books) and clutter blobs, embedded as the realistic detector embeds them (a share of the
@@ -170,8 +170,8 @@ def render(figures: Figures, title: str) -> list[str]:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(prog="python -m sim.appearance", description=__doc__)
-    parser.add_argument("--report", action="store_true", help="print the appearance figures")
+    """Print the report for the defaults, then for each `--distinctiveness` value."""
+    parser = argparse.ArgumentParser(prog="python -m sim.appearance_report", description=__doc__)
     parser.add_argument(
         "--distinctiveness",
         type=float,
@@ -181,8 +181,6 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args(argv)
-    if not args.report:
-        parser.error("nothing to do: pass --report")
     default = AppearanceSpec()
     settings = [("defaults", default)]
     settings += [
@@ -191,3 +189,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ]
     for name, spec in settings:
         print("\n".join(render(measure(spec, args.seed), f"\n{name}:")))
+
+
+if __name__ == "__main__":
+    main()

@@ -4,12 +4,14 @@ value (the old near-oracle behaviour), each field checked by name."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import zlib
 
 import numpy as np
 import pytest
 
+from sim import appearance_report
 from sim.appearance import AppearanceModel, distinctiveness_of
 from sim.appearance_report import GATE, measure, render
 from sim.camera import CameraModel, look_at
@@ -158,6 +160,17 @@ def test_the_report_shows_the_overlap_and_the_knob_moves_it() -> None:
     assert above["distinct"] < 0.15 < 0.6 < above["generic"]
     lines = render(defaults, "defaults:")
     assert lines[0] == "defaults:" and any("right" in line and "wrong" in line for line in lines)
+
+
+def test_the_report_command_prints_the_defaults_and_each_knob_value(
+    monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    quick = functools.partial(measure, trials=20)
+    monkeypatch.setattr(appearance_report, "measure", quick)
+    appearance_report.main(["--distinctiveness", "0.3"])
+    printed = capsys.readouterr().out
+    assert "defaults:" in printed and "distinctiveness 0.3:" in printed
+    assert printed.count("same instance") == 2 and printed.count(" right ") == 2 * 4
 
 
 def test_an_object_crop_shows_its_support() -> None:
