@@ -15,7 +15,9 @@ never a branch in the code:
 from __future__ import annotations
 
 import math
+import multiprocessing
 from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -308,3 +310,47 @@ def run_row(
         "seconds": result.seconds,
     }
     return row, result
+
+
+def _summary(row: Mapping[str, Any]) -> str:
+    return (
+        f"{row['scenario']} s{row['seed']} {row['order']}: coarse F1 {row['coarse']['f1']:.3f}, "
+        f"fine F1 {row['fine']['f1']:.3f}, {row['keyframes']} keyframes, "
+        f"{len(row['inspections'])} inspections, {row['seconds']:.0f} s"
+    )
+
+
+def run_rows(
+    work: Sequence[tuple[Path, int, str]],
+    *,
+    params: Mapping[str, Any] | None = None,
+    client: Client | None = None,
+    settings: RolloutSettings | None = None,
+    jobs: int = 1,
+    progress: bool = True,
+) -> list[tuple[dict[str, Any], RolloutResult]]:
+    """`run_row` for every (world, seed, order), in that order; with `jobs` > 1 in that many
+    worker processes (in-process memories only). One line per finished rollout."""
+    if jobs <= 1 or len(work) <= 1:
+        runs = []
+        for path, seed, order in work:
+            runs.append(run_row(path, seed, order, params=params, client=client, settings=settings))
+            if progress:
+                print(_summary(runs[-1][0]), flush=True)
+        return runs
+    if client is not None:
+        raise ValueError("jobs: rollouts through a service run one at a time (use jobs=1)")
+    done: dict[int, tuple[dict[str, Any], RolloutResult]] = {}
+    # spawn, not fork: the parent may hold open3d's threads, which a fork would copy half-way.
+    with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = {
+            pool.submit(run_row, path, seed, order, params=params, settings=settings): index
+            for index, (path, seed, order) in enumerate(work)
+        }
+        for future in as_completed(futures):
+            done[futures[future]] = future.result()
+            if progress:
+                print(
+                    f"[{len(done)}/{len(work)}] " + _summary(done[futures[future]][0]), flush=True
+                )
+    return [done[index] for index in range(len(work))]

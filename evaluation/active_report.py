@@ -15,6 +15,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from evaluation.active import ORDERS
+from evaluation.confidence import mean_interval, spelled
 from evaluation.metrics import mean_std
 from sim.rollout import RolloutResult
 
@@ -28,6 +29,9 @@ PAPER_TABLE3 = {
     "Benevolence (14/12)": ((0.854, 0.714, 0.777, 0.464), (0.617, 0.500, 0.550, 0.029)),
     "All rollouts": ((0.933, 0.812, 0.866, 0.333), (0.818, 0.653, 0.713, 0.045)),
 }
+
+
+MAX_WORLD_ROWS = 6  # Table 3 lists each world up to this many worlds
 
 
 def at_budget(row: Mapping[str, Any], budget: int) -> float:
@@ -55,7 +59,9 @@ def table3(rows: Sequence[Mapping[str, Any]]) -> str:
         "| --- | --- | --- | --- | --- | --- | --- | --- | --- |",
     ]
     worlds = sorted({r["scenario"] for r in subject})
-    groups = [[w] for w in worlds] + ([worlds] if len(worlds) > 1 else [])
+    # Many generated worlds: the pooled row alone (the interval table gives their spread).
+    singles = [[w] for w in worlds] if len(worlds) <= MAX_WORLD_ROWS else []
+    groups = singles + ([worlds] if len(worlds) > 1 else [])
     for group in groups:
         chosen = [r for r in subject if r["scenario"] in group]
         if not chosen:
@@ -71,6 +77,29 @@ def table3(rows: Sequence[Mapping[str, Any]]) -> str:
     lines += [lines[0], lines[1]]
     for name, (coarse, fine) in PAPER_TABLE3.items():
         lines.append(f"| {name} | " + " | ".join(f"{v:.3f}" for v in (*coarse, *fine)) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def interval_table(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int]) -> str:
+    """Per order: coarse and fine F1, and fine F1 at each budget, each with its 95% bootstrap
+    interval over world-seed rollouts."""
+    orders = [o for o in ORDERS if any(r["order"] == o for r in rows)]
+    runs = len({(r["scenario"], r["seed"]) for r in rows})
+    titles = ["coarse F1", "fine F1", *(f"fine F1 @ {b}" for b in budgets)]
+    lines = [
+        f"Over {runs} world-seed rollouts; 95% bootstrap intervals over them in brackets.",
+        "",
+        "| order | " + " | ".join(titles) + " |",
+        "| --- | " + " | ".join("---" for _ in titles) + " |",
+    ]
+    for order in orders:
+        chosen = [r for r in rows if r["order"] == order]
+        series = [
+            [r["coarse"]["f1"] for r in chosen],
+            [r["fine"]["f1"] for r in chosen],
+            *([at_budget(r, b) for r in chosen] for b in budgets),
+        ]
+        lines.append(f"| {order} | " + " | ".join(spelled(mean_interval(s)) for s in series) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -113,6 +142,7 @@ def paired_table(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int]) -> s
 
 def text(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int], header: str) -> str:
     out = ["# Autonomous construction (the paper's Table 3)", "", header, "", table3(rows)]
+    out += ["## Every order, with intervals over rollouts", "", interval_table(rows, budgets)]
     out += [
         "## Paired acquisition: fine F1 vs number of inspections",
         "",
@@ -256,8 +286,9 @@ def write(
     budgets: Sequence[int],
     params: Mapping[str, Any],
     code_version: str,
+    worlds: Mapping[str, Any] | None = None,
 ) -> list[Path]:
-    """results.json, table.md and the figures."""
+    """results.json, table.md and the figures; `worlds`: the generated split, when it ran on one."""
     out.mkdir(parents=True, exist_ok=True)
     header = (
         f"PBD-AG rows: mean ± sample std over {len({(r['scenario'], r['seed']) for r in rows})} "
@@ -273,6 +304,7 @@ def write(
         "seeds": list(seeds),
         "budgets": list(budgets),
         "params": dict(params),
+        "generated_worlds": dict(worlds) if worlds else None,
         "orders": {name: make(0) for name, make in ORDERS.items()},
         "paper_table3": {k: {"coarse": v[0], "fine": v[1]} for k, v in PAPER_TABLE3.items()},
         "runs": list(rows),

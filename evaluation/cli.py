@@ -84,7 +84,13 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
             type=Path,
             help="scenario YAML files (default: every shipped one)",
         )
-        parser.add_argument("--seeds", nargs="+", type=int, default=[7, 17, 27])
+        parser.add_argument(
+            "--seeds",
+            nargs="+",
+            type=int,
+            help="stream seeds per world (default: 7 17 27 on scenario files, 7 on generated worlds)",
+        )
+        add_world_options(parser)
         parser.add_argument("--out", type=Path, default=Path("evaluation/results") / protocol)
         parser.add_argument(
             "--methods", nargs="+", help="method names (default: all of the protocol's)"
@@ -115,7 +121,13 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     active.add_argument(
         "--scenario", nargs="+", type=Path, help="active world YAML files (default: the shipped)"
     )
-    active.add_argument("--seeds", nargs="+", type=int, default=[7, 17, 27])
+    active.add_argument(
+        "--seeds",
+        nargs="+",
+        type=int,
+        help="rollout seeds per world (default: 7 17 27 on scenario files, 7 on generated worlds)",
+    )
+    add_world_options(active)
     active.add_argument("--out", type=Path, default=Path("evaluation/results") / "active")
     active.add_argument(
         "--orders",
@@ -136,6 +148,66 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     active.add_argument("--params", metavar="JSON", help="overrides of core/params.py")
     active.add_argument("--quiet", action="store_true", help="no progress lines")
     active.set_defaults(handler=needs_eval_extra(run_active))
+
+
+def add_world_options(parser: argparse.ArgumentParser) -> None:
+    """--generated N --split dev|test, and --jobs."""
+    parser.add_argument(
+        "--generated",
+        type=int,
+        metavar="N",
+        help="run on the first N generated worlds of --split instead of scenario files "
+        "(written to OUT/worlds/)",
+    )
+    parser.add_argument(
+        "--split",
+        choices=("dev", "test"),
+        default="dev",
+        help="which generated worlds: dev (traces and tuning) or test (reporting only); "
+        "default: dev",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="worlds run side by side in this many processes (default: 1)",
+    )
+
+
+def world_paths(args: argparse.Namespace, shipped: list[str]) -> list[Path] | None:
+    """The scenario files of a run: generated ones, given ones, or the shipped ones (None after
+    printing why when they cannot be had). Sets args.seeds to the default when none was given."""
+    from evaluation.worlds import GENERATED_STREAM_SEED, world_files
+
+    if args.jobs < 1:
+        print(f"pbdag eval: --jobs: {args.jobs} is not a positive number", file=sys.stderr)
+        return None
+    if args.generated is None:
+        args.seeds = args.seeds or [7, 17, 27]
+        return loadable(args.scenario, shipped)
+    if args.scenario:
+        print("pbdag eval: --generated and --scenario exclude each other", file=sys.stderr)
+        return None
+    if args.generated < 1:
+        print(
+            f"pbdag eval: --generated: {args.generated} is not a positive number", file=sys.stderr
+        )
+        return None
+    args.seeds = args.seeds or [GENERATED_STREAM_SEED]
+    return world_files(args.generated, args.split, args.out, active=args.protocol == "active")
+
+
+def world_note(args: argparse.Namespace) -> dict[str, Any] | None:
+    """What results.json records of generated worlds (None for scenario files)."""
+    if args.generated is None:
+        return None
+    from sim.generator import split_seeds
+
+    return {
+        "split": args.split,
+        "count": args.generated,
+        "world_seeds": list(split_seeds(args.split, args.generated)),
+    }
 
 
 def parsed_params(text: str | None) -> dict[str, Any]:
@@ -170,11 +242,11 @@ def run_active(args: argparse.Namespace) -> int:
 
     import httpx
 
-    from evaluation.active import ORDERS, run_row
+    from evaluation.active import ORDERS, run_rows
     from evaluation.active_report import write
     from evaluation.report import code_version
     from pbdag_client import PbdagError
-    from sim.rollout import RolloutResult, RolloutSettings
+    from sim.rollout import RolloutSettings
     from sim.scenario import ScenarioError
 
     def fail(message: str) -> int:
@@ -188,49 +260,51 @@ def run_active(args: argparse.Namespace) -> int:
         return fail("--budgets: every budget must be at least 1 inspection")
     if args.keyframes < 1:
         return fail("--keyframes: must be at least 1")
-    scenarios = args.scenario or [SCENARIOS_DIR / name for name in ACTIVE_SHIPPED]
-    for path in scenarios:
-        if not Path(path).is_file():
-            return fail(f"--scenario: {path} is not a file")
+    if args.generated is None and args.scenario:
+        for path in args.scenario:
+            if not Path(path).is_file():
+                return fail(f"--scenario: {path} is not a file")
+    scenarios = world_paths(args, ACTIVE_SHIPPED)
+    if scenarios is None:
+        return 2
+    if args.via_service and args.jobs > 1:
+        return fail("--jobs: runs through --via-service go one at a time")
     try:
         overrides = parsed_params(args.params)
     except ValueError as error:
         return fail(f"--params: {error}")
     client = service_client(args.via_service, args.token)
-    settings = RolloutSettings(keyframe_budget=args.keyframes)
-    rows: list[dict[str, object]] = []
-    results: list[RolloutResult] = []
+    work = [
+        (Path(p), seed, order) for p in scenarios for seed in args.seeds for order in args.orders
+    ]
     try:
-        for path in scenarios:
-            for seed in args.seeds:
-                for order in args.orders:
-                    try:
-                        row, result = run_row(
-                            Path(path),
-                            seed,
-                            order,
-                            params=overrides,
-                            client=client,
-                            settings=settings,
-                        )
-                    except ScenarioError as error:
-                        return fail(f"--scenario: {path}: {error}")
-                    except (httpx.HTTPError, PbdagError) as error:
-                        return fail(f"--via-service: {error}")
-                    rows.append(row)
-                    results.append(result)
-                    if not args.quiet:
-                        print(
-                            f"{row['scenario']} s{seed} {order}: coarse F1 "
-                            f"{row['coarse']['f1']:.3f}, fine F1 {row['fine']['f1']:.3f}, "
-                            f"{row['keyframes']} keyframes, {len(row['inspections'])} "
-                            f"inspections, {row['seconds']:.0f} s",
-                            flush=True,
-                        )
+        runs = run_rows(
+            work,
+            params=overrides,
+            client=client,
+            settings=RolloutSettings(keyframe_budget=args.keyframes),
+            jobs=args.jobs,
+            progress=not args.quiet,
+        )
+    except ScenarioError as error:
+        return fail(f"--scenario: {error}")
+    except (httpx.HTTPError, PbdagError) as error:
+        return fail(f"--via-service: {error}")
     finally:
         if client is not None:
             client.close()
-    written = write(rows, results, args.out, args.seeds, args.budgets, overrides, code_version())
+    rows = [row for row, _ in runs]
+    results = [result for _, result in runs]
+    written = write(
+        rows,
+        results,
+        args.out,
+        args.seeds,
+        args.budgets,
+        overrides,
+        code_version(),
+        world_note(args),
+    )
     for written_path in written:
         print(f"wrote {written_path}")
     return 0
@@ -265,9 +339,10 @@ def run(args: argparse.Namespace) -> int:
     from evaluation.protocols import run_protocol
     from evaluation.report import write_report
     from evaluation.tables import console_summary
+    from evaluation.world_intervals import interval_table
 
     protocol = args.protocol
-    scenarios = loadable(args.scenario, DEFAULT_SCENARIOS[protocol])
+    scenarios = world_paths(args, DEFAULT_SCENARIOS[protocol])
     if scenarios is None:
         return 2
     catalogue = DYNAMIC_METHODS if protocol == "dynamic" else FIXTURE_METHODS
@@ -283,6 +358,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if overrides:
         methods = with_params(methods, overrides)
+    if args.via_service and args.jobs > 1:
+        print("pbdag eval: --jobs: runs through --via-service go one at a time", file=sys.stderr)
+        return 2
     client = service_client(args.via_service, args.token)
     try:
         rows = run_protocol(
@@ -293,12 +371,15 @@ def run(args: argparse.Namespace) -> int:
             via_service=client,
             progress=not args.quiet,
             frames=args.frames,
+            jobs=args.jobs,
         )
     finally:
         if client is not None:
             client.close()
-    written = write_report(protocol, rows, args.out, args.seeds, overrides)
+    written = write_report(protocol, rows, args.out, args.seeds, overrides, world_note(args))
     print(console_summary(protocol, rows))
+    if args.generated is not None:
+        print(interval_table(protocol, rows))
     for path in written:
         print(f"wrote {path}")
     return 0

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import multiprocessing
 import sys
+import time
 from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -161,6 +164,45 @@ def fixture_table_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
     }
 
 
+def run_stream(
+    protocol: str,
+    path: Path,
+    seed: int,
+    methods: Sequence[Method],
+    via_service: Client | None = None,
+    progress: bool = True,
+    frames: int | None = None,
+) -> list[dict[str, Any]]:
+    """Every method on one (scenario, seed) stream; one row of metrics per method."""
+    score = dynamic_scores if protocol == "dynamic" else fixture_table_scores
+    stream = make_stream(path, seed, frames)
+    rows: list[dict[str, Any]] = []
+    with tqdm(
+        total=len(methods) * len(stream.batches),
+        desc=f"{stream.run.scenario.name} seed {seed}",
+        unit="batch",
+        file=sys.stderr,
+        disable=not progress,
+    ) as bar:
+        for method in methods:
+            bar.set_postfix(method=method.name, refresh=False)
+            head = {
+                "scenario": stream.run.scenario.name,
+                "scenario_file": str(path),
+                "scenario_sha256": stream.run.scenario_sha256,
+                "seed": seed,
+                "method": method.name,
+            }
+            reason = method.unavailable_reason()
+            if reason is not None:  # reported as not run, never replaced by another rule
+                bar.update(len(stream.batches))
+                rows.append({**head, "unavailable": reason})
+                continue
+            result = run_method(stream, method, via_service, bar)
+            rows.append({**head, **score(stream, result)})
+    return rows
+
+
 def run_protocol(
     protocol: str,
     scenario_paths: Sequence[Path],
@@ -169,35 +211,43 @@ def run_protocol(
     via_service: Client | None = None,
     progress: bool = True,
     frames: int | None = None,
+    jobs: int = 1,
 ) -> list[dict[str, Any]]:
-    """Every method on every (scenario, seed) stream; one row of metrics per run."""
-    score = dynamic_scores if protocol == "dynamic" else fixture_table_scores
-    rows: list[dict[str, Any]] = []
-    for path in scenario_paths:
-        for seed in seeds:
-            stream = make_stream(path, seed, frames)
-            label = f"{stream.run.scenario.name} seed {seed}"
-            with tqdm(
-                total=len(methods) * len(stream.batches),
-                desc=label,
-                unit="batch",
-                file=sys.stderr,
-                disable=not progress,
-            ) as bar:
-                for method in methods:
-                    bar.set_postfix(method=method.name, refresh=False)
-                    head = {
-                        "scenario": stream.run.scenario.name,
-                        "scenario_file": str(path),
-                        "scenario_sha256": stream.run.scenario_sha256,
-                        "seed": seed,
-                        "method": method.name,
-                    }
-                    reason = method.unavailable_reason()
-                    if reason is not None:  # reported as not run, never replaced by another rule
-                        bar.update(len(stream.batches))
-                        rows.append({**head, "unavailable": reason})
-                        continue
-                    result = run_method(stream, method, via_service, bar)
-                    rows.append({**head, **score(stream, result)})
-    return rows
+    """Every method on every (scenario, seed) stream; one row of metrics per run.
+
+    With `jobs` > 1 the streams run in that many worker processes (in-process methods only);
+    each finished stream prints one line instead of a progress bar. Rows keep the order of
+    (scenario, seed) whatever the order the streams finish in.
+    """
+    work = [(path, seed) for path in scenario_paths for seed in seeds]
+    if jobs <= 1 or len(work) <= 1:
+        return [
+            row
+            for path, seed in work
+            for row in run_stream(protocol, path, seed, methods, via_service, progress, frames)
+        ]
+    if via_service is not None:
+        raise ValueError("jobs: streams through a service run one at a time (use jobs=1)")
+    done: dict[tuple[Path, int], list[dict[str, Any]]] = {}
+    # spawn, not fork: the parent may hold open3d's threads, which a fork would copy half-way.
+    context = multiprocessing.get_context("spawn")
+    started = time.monotonic()
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        futures = {
+            pool.submit(run_stream, protocol, path, seed, methods, None, False, frames): (
+                path,
+                seed,
+            )
+            for path, seed in work
+        }
+        for future in as_completed(futures):
+            key = futures[future]
+            done[key] = future.result()
+            if progress:
+                print(
+                    f"[{len(done)}/{len(work)}] {key[0].stem} seed {key[1]} "
+                    f"({time.monotonic() - started:.0f} s)",
+                    file=sys.stderr,
+                    flush=True,
+                )
+    return [row for key in work for row in done[key]]

@@ -27,6 +27,7 @@ from evaluation.tables import (
     table,
     unavailable_note,
 )
+from evaluation.world_intervals import interval_table, intervals_json
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -117,9 +118,11 @@ def write_report(
     out: Path,
     seeds: Sequence[int],
     params: Mapping[str, Any] | None = None,
+    worlds: Mapping[str, Any] | None = None,
 ) -> list[Path]:
     """results.json, table.md and the figures under `out`; `params`: the overrides of
-    core/params.py every method ran with (none: its defaults)."""
+    core/params.py every method ran with (none: its defaults); `worlds`: the generated split
+    the run used (none: scenario files)."""
     out.mkdir(parents=True, exist_ok=True)
     scenarios = {
         r["scenario"]: {"file": r["scenario_file"], "sha256": r["scenario_sha256"]} for r in rows
@@ -129,6 +132,8 @@ def write_report(
         "code_version": code_version(),
         "seeds": list(seeds),
         "params": dict(params or {}),
+        "generated_worlds": dict(worlds) if worlds else None,
+        "intervals": intervals_json(protocol, rows),
         "scenarios": scenarios,
         "runs": list(rows),
     }
@@ -144,6 +149,13 @@ def write_report(
         )
         + ".\n\n"
     )
+    if worlds:
+        header += (
+            f"Generated worlds: the {worlds['split']} split, {worlds['count']} worlds.\n\n"
+            "## Every method, with intervals over worlds\n\n"
+            + interval_table(protocol, rows)
+            + "\n"
+        )
     if protocol == "dynamic":
         text = "# Dynamic memory (the paper's Table 2)\n\n" + header + dynamic_text(rows)
     else:

@@ -1,0 +1,79 @@
+"""The tables of a run over many worlds: every figure with its bootstrap interval over worlds."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from evaluation.confidence import Interval, mean_interval, ratio_interval, spelled
+from evaluation.tables import methods_in_order, ran
+
+# (key, title, kind): a mean over worlds, or a pooled ratio of two per-world counts.
+DYNAMIC_FIGURES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("idf1", "IDF1↑", ("idf1",)),
+    ("id_presence_f1", "ID-Pres.↑", ("id_presence_f1",)),
+    ("id_switches", "IDS↓ (per world)", ("id_switches",)),
+    ("event_recall", "Event R.↑", ("events_recalled", "events_total")),
+    ("false_absence", "False abs.↓", ("false_absent_checkpoints", "eligible_checkpoints")),
+    (
+        "false_absence_identity",
+        "False abs. (identity)↓",
+        ("false_absent_checkpoints_identity", "eligible_checkpoints_identity"),
+    ),
+)
+FIXTURE_FIGURES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    ("precision", "P↑", ("precision",)),
+    ("recall", "R↑", ("recall",)),
+    ("f1", "F1↑", ("f1",)),
+    ("center_error", "Err. [m]↓", ("center_error",)),
+    ("count_mae", "MAE↓", ("count_mae",)),
+)
+
+
+def _figures(protocol: str) -> tuple[tuple[str, str, tuple[str, ...]], ...]:
+    return DYNAMIC_FIGURES if protocol == "dynamic" else FIXTURE_FIGURES
+
+
+def intervals(protocol: str, rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, Interval]]:
+    """Per method, per figure: the value over every world and its 95% bootstrap interval."""
+    rows = ran(rows)
+    table: dict[str, dict[str, Interval]] = {}
+    for method in methods_in_order(rows):
+        mine = [r for r in rows if r["method"] == method]
+        figures: dict[str, Interval] = {}
+        for key, _, fields in _figures(protocol):
+            if len(fields) == 2:
+                figures[key] = ratio_interval(
+                    [r[fields[0]] for r in mine], [r[fields[1]] for r in mine]
+                )
+                continue
+            values = [r[fields[0]] for r in mine if r[fields[0]] is not None]
+            if values:
+                figures[key] = mean_interval(values)
+        table[method] = figures
+    return table
+
+
+def intervals_json(protocol: str, rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """What results.json keeps of `intervals`."""
+    return {
+        method: {key: interval.as_json() for key, interval in figures.items()}
+        for method, figures in intervals(protocol, rows).items()
+    }
+
+
+def interval_table(protocol: str, rows: Sequence[dict[str, Any]]) -> str:
+    """Markdown: one row per method, each cell `value [low, high]`."""
+    table = intervals(protocol, rows)
+    figures = _figures(protocol)
+    worlds = len({(r["scenario"], r["seed"]) for r in ran(rows)})
+    lines = [
+        f"Over {worlds} worlds; 95% bootstrap intervals over worlds in brackets.",
+        "",
+        "| Method | " + " | ".join(title for _, title, _ in figures) + " |",
+        "|---|" + "---|" * len(figures),
+    ]
+    for method, values in table.items():
+        cells = [spelled(values[key]) if key in values else "-" for key, _, _ in figures]
+        lines.append(f"| {method} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,101 @@
+"""Runs over generated worlds: the split's files, the intervals over worlds, side-by-side jobs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from evaluation.confidence import mean_interval, ratio_interval, spelled
+from evaluation.world_intervals import interval_table, intervals
+from service.cli import main
+from sim.generator import split_seeds
+from sim.scenario import load_scenario
+
+
+def world_row(scenario: str, method: str, idf1: float, recalled: int) -> dict[str, Any]:
+    return {
+        "scenario": scenario,
+        "seed": 7,
+        "method": method,
+        "idf1": idf1,
+        "id_presence_f1": idf1,
+        "id_switches": 1,
+        "events_recalled": recalled,
+        "events_total": 4,
+        "false_absent_checkpoints": 0,
+        "eligible_checkpoints": 10,
+        "false_absent_checkpoints_identity": 1,
+        "eligible_checkpoints_identity": 10,
+    }
+
+
+def test_a_mean_over_worlds_lies_inside_its_interval_and_a_constant_has_a_point_interval() -> None:
+    spread = mean_interval([0.6, 0.7, 0.8, 0.9, 1.0])
+    assert spread.value == pytest.approx(0.8)
+    assert spread.low < spread.value < spread.high
+    assert spread.low >= 0.6 and spread.high <= 1.0
+    constant = mean_interval([1.0, 1.0, 1.0])
+    assert (constant.low, constant.value, constant.high) == (1.0, 1.0, 1.0)
+    assert spelled(constant) == "1.000 [1.000, 1.000]"
+
+
+def test_a_pooled_ratio_resamples_whole_worlds() -> None:
+    # Worlds at 1/4, 4/4 and 3/12: pooled 8/20, not the mean of the world ratios (0.5) ...
+    pooled = ratio_interval([1, 4, 3], [4, 4, 12])
+    assert pooled.value == pytest.approx(8 / 20)
+    # ... and every resample is a ratio of sums of whole worlds, so it stays within the
+    # smallest and largest world ratio.
+    assert 0.25 <= pooled.low <= pooled.value <= pooled.high <= 1.0
+
+
+def test_the_interval_table_has_one_row_per_method_and_every_figure() -> None:
+    rows = [
+        world_row(f"gen-{k}", method, idf1, recalled)
+        for k, (idf1, recalled) in enumerate([(0.9, 4), (0.8, 3), (0.7, 2)])
+        for method in ("PBD-AG", "B")
+    ]
+    table = intervals("dynamic", rows)
+    assert set(table) == {"PBD-AG", "B"}
+    assert table["PBD-AG"]["event_recall"].value == pytest.approx(9 / 12)
+    assert table["PBD-AG"]["false_absence_identity"].value == pytest.approx(0.1)
+    text = interval_table("dynamic", rows)
+    assert "Over 3 worlds" in text
+    assert "| PBD-AG | .800 [" in text
+
+
+@pytest.fixture(scope="module")
+def generated_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("generated")
+    common = ["eval", "fixtures", "--generated", "2", "--split", "test", "--frames", "16"]
+    assert main([*common, "--methods", "PBD-AG", "--quiet", "--jobs", "2", "--out", str(out)]) == 0
+    return out
+
+
+def test_eval_on_generated_test_worlds_writes_their_files_and_intervals(
+    generated_run: Path,
+) -> None:
+    results = json.loads((generated_run / "results.json").read_text())
+    seeds = list(split_seeds("test", 2))
+    assert results["generated_worlds"] == {"split": "test", "count": 2, "world_seeds": seeds}
+    files = sorted((generated_run / "worlds").glob("*.yaml"))
+    assert len(files) == 2
+    assert {load_scenario(path).name for path in files} == {r["scenario"] for r in results["runs"]}
+    f1 = results["intervals"]["PBD-AG"]["f1"]
+    assert f1["worlds"] == 2 and f1["low"] <= f1["value"] <= f1["high"]
+    assert "Generated worlds: the test split, 2 worlds." in (generated_run / "table.md").read_text()
+
+
+def test_generated_and_given_worlds_exclude_each_other(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    given = ["--scenario", "x.yaml", "--generated", "2", "--out", str(tmp_path)]
+    assert main(["eval", "dynamic", *given]) == 2
+    assert "--generated and --scenario exclude each other" in capsys.readouterr().err
+    assert main(["eval", "dynamic", "--generated", "0", "--out", str(tmp_path)]) == 2
+    assert "--generated: 0 is not a positive number" in capsys.readouterr().err
+    assert main(["eval", "dynamic", "--generated", "1", "--jobs", "0", "--out", str(tmp_path)]) == 2
+    assert "--jobs: 0 is not a positive number" in capsys.readouterr().err
+    assert not (tmp_path / "results.json").exists()
