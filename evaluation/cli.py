@@ -84,14 +84,13 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
             type=Path,
             help="scenario YAML files (default: every shipped one)",
         )
-        parser.add_argument(
-            "--seeds",
-            nargs="+",
-            type=int,
-            help="stream seeds per world (default: 7 17 27 on scenario files, 7 on generated worlds)",
-        )
         add_world_options(parser)
-        parser.add_argument("--out", type=Path, default=Path("evaluation/results") / protocol)
+        parser.add_argument(
+            "--out",
+            type=Path,
+            default=Path("evaluation/results") / protocol,
+            help=f"folder of results.json, table.md and figures (default: evaluation/results/{protocol})",
+        )
         parser.add_argument(
             "--methods", nargs="+", help="method names (default: all of the protocol's)"
         )
@@ -121,14 +120,13 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     active.add_argument(
         "--scenario", nargs="+", type=Path, help="active world YAML files (default: the shipped)"
     )
-    active.add_argument(
-        "--seeds",
-        nargs="+",
-        type=int,
-        help="rollout seeds per world (default: 7 17 27 on scenario files, 7 on generated worlds)",
-    )
     add_world_options(active)
-    active.add_argument("--out", type=Path, default=Path("evaluation/results") / "active")
+    active.add_argument(
+        "--out",
+        type=Path,
+        default=Path("evaluation/results") / "active",
+        help="folder of results.json, table.md and figures (default: evaluation/results/active)",
+    )
     active.add_argument(
         "--orders",
         nargs="+",
@@ -151,7 +149,13 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
 
 
 def add_world_options(parser: argparse.ArgumentParser) -> None:
-    """--generated N --split dev|test, and --jobs."""
+    """--seeds, --generated N --split dev|test, and --jobs."""
+    parser.add_argument(
+        "--seeds",
+        nargs="+",
+        type=int,
+        help="seeds per world (default: 7 17 27 on scenario files, 7 on generated worlds)",
+    )
     parser.add_argument(
         "--generated",
         type=int,

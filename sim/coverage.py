@@ -6,6 +6,7 @@ import argparse
 import dataclasses
 import json
 from collections import defaultdict
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +15,7 @@ import numpy as np
 from sim.recorded import composite
 from sim.render import render
 from sim.scenario import Scenario, load_scenario
+from sim.scenario_parts import EventSpec
 from sim.stream import frame_source
 from sim.timeline import Timeline
 
@@ -34,6 +36,34 @@ def _runs(frames: list[int]) -> list[tuple[int, int]]:
 def _counts(instance: np.ndarray, size: int) -> np.ndarray:
     """Pixels per instance index."""
     return np.bincount(instance.ravel() + 1, minlength=size + 1)[1:]
+
+
+def _event_entry(
+    event: EventSpec,
+    scenario: Scenario,
+    seen: Mapping[str, list[int]],
+    place_seen: Mapping[str, list[int]],
+) -> dict[str, Any]:
+    """One event's line: its object's visible frames before and after, later fixture visits,
+    and for a disappearance or appearance the frames its place was in view."""
+    frames = seen.get(event.object, [])
+    entry: dict[str, Any] = {
+        "frame": event.frame,
+        "type": event.type,
+        "object": event.object,
+        "visible_before": sum(frame < event.frame for frame in frames),
+        "visible_after": sum(frame >= event.frame for frame in frames),
+        "fixture_visits_after": {
+            spec.id: len(_runs([f for f in seen.get(spec.id, []) if f >= event.frame]))
+            for spec in scenario.fixtures
+        },
+    }
+    place = place_seen.get(event.object, [])
+    if event.type == "disappear":
+        entry["place_visible_after"] = sum(f >= event.frame for f in place)
+    if event.type == "appear":
+        entry["place_visible_before"] = sum(f < event.frame for f in place)
+    return entry
 
 
 def coverage(scenario: Scenario) -> dict[str, Any]:
@@ -86,25 +116,7 @@ def coverage(scenario: Scenario) -> dict[str, Any]:
             index = ghost_world.object_index(object_id)
             if int((ghost.instance == index).sum()) >= object_pixels:
                 place_seen[object_id].append(frame_index)
-    events = []
-    for event in scenario.events:
-        frames = seen.get(event.object, [])
-        entry = {
-            "frame": event.frame,
-            "type": event.type,
-            "object": event.object,
-            "visible_before": sum(frame < event.frame for frame in frames),
-            "visible_after": sum(frame >= event.frame for frame in frames),
-            "fixture_visits_after": {
-                spec.id: len(_runs([f for f in seen.get(spec.id, []) if f >= event.frame]))
-                for spec in scenario.fixtures
-            },
-        }
-        if event.type == "disappear":
-            entry["place_visible_after"] = sum(f >= event.frame for f in place_seen[event.object])
-        if event.type == "appear":
-            entry["place_visible_before"] = sum(f < event.frame for f in place_seen[event.object])
-        events.append(entry)
+    events = [_event_entry(event, scenario, seen, place_seen) for event in scenario.events]
     return {
         "scenario": scenario.name,
         "frames": scenario.frames,

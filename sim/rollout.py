@@ -47,6 +47,7 @@ from sim.memories import (
     InspectionOutcome,
     Memory,
     Node,
+    PlanStep,
     Recorded,
     Refusal,
     ServiceMemory,
@@ -228,6 +229,59 @@ def _wrap(angle: float) -> float:
     return math.atan2(math.sin(angle), math.cos(angle))
 
 
+def _inspect(
+    robot: Robot,
+    memory: Memory,
+    step: PlanStep,
+    settings: RolloutSettings,
+    visits: dict[tuple[int, int], int],
+    result: RolloutResult,
+) -> str | None:
+    """Drive to the plan's view and sweep it as one capture; why to stop, if the budget is spent."""
+    assert step.view is not None and step.fixture_id is not None
+    budget = settings.inspection_budget
+    if budget is not None and len(result.captures) >= budget:
+        return f"inspection budget ({budget}) spent"
+    vx, vy, vyaw, vpitch = step.view
+    robot.drive_to(vx, vy)
+    frames = robot.sweep(vyaw, vpitch)
+    capture_id = f"cap-{len(result.captures) + len(result.refused):03d}"
+    view = ViewPose(x=vx, y=vy, yaw=_wrap(vyaw))
+    outcome = memory.inspect(capture_id, step.fixture_id, frames, view)
+    capture = Capture(step.fixture_id, step.view, outcome, len(result.keyframes), memory.graph())
+    (result.refused if isinstance(outcome, Refusal) else result.captures).append(capture)
+    return None
+
+
+def _explore(
+    robot: Robot,
+    memory: Memory,
+    step: PlanStep,
+    settings: RolloutSettings,
+    visits: dict[tuple[int, int], int],
+    result: RolloutResult,
+) -> str | None:
+    """Drive to the frontier goal and look around; why to stop (budget spent, stuck), if so."""
+    if robot.keyframes_left <= 0:
+        return f"keyframe budget ({settings.keyframe_budget}) spent"
+    if step.goal is None:
+        if visits.get((-1, -1), 0) >= settings.max_visits_per_goal:
+            return "stuck: told to look around where it already looked"
+        visits[(-1, -1)] = visits.get((-1, -1), 0) + 1
+        robot.look_around()
+        return None
+    key = (round(step.goal[0] / 0.5), round(step.goal[1] / 0.5))
+    visits[key] = visits.get(key, 0) + 1
+    if visits[key] > settings.max_visits_per_goal:
+        result.stuck_goals.append(step.goal)
+        return f"stuck: frontier goal {step.goal} reached {visits[key] - 1} times"
+    robot.drive_to(*step.goal)
+    centroid = step.centroid or step.goal
+    facing = math.atan2(centroid[1] - robot.y, centroid[0] - robot.x)
+    robot.look_around(facing)
+    return None
+
+
 def rollout(
     scenario: Scenario,
     seed: int,
@@ -274,44 +328,11 @@ def rollout(
         if step.decision == "done":
             result.stop_reason = "plan done: " + step.reason
             break
-        if step.decision == "inspect":
-            assert step.view is not None and step.fixture_id is not None
-            budget = settings.inspection_budget
-            if budget is not None and len(result.captures) >= budget:
-                result.stop_reason = f"inspection budget ({budget}) spent"
-                break
-            vx, vy, vyaw, vpitch = step.view
-            robot.drive_to(vx, vy)
-            frames = robot.sweep(vyaw, vpitch)
-            capture_id = f"cap-{len(result.captures) + len(result.refused):03d}"
-            view = ViewPose(x=vx, y=vy, yaw=_wrap(vyaw))
-            outcome = memory.inspect(capture_id, step.fixture_id, frames, view)
-            capture = Capture(
-                step.fixture_id, step.view, outcome, len(result.keyframes), memory.graph()
-            )
-            (result.refused if isinstance(outcome, Refusal) else result.captures).append(capture)
-            continue
-        # explore
-        if robot.keyframes_left <= 0:
-            result.stop_reason = f"keyframe budget ({settings.keyframe_budget}) spent"
+        act = _inspect if step.decision == "inspect" else _explore
+        stop = act(robot, memory, step, settings, visits, result)
+        if stop is not None:
+            result.stop_reason = stop
             break
-        if step.goal is None:
-            if visits.get((-1, -1), 0) >= settings.max_visits_per_goal:
-                result.stop_reason = "stuck: told to look around where it already looked"
-                break
-            visits[(-1, -1)] = visits.get((-1, -1), 0) + 1
-            robot.look_around()
-            continue
-        key = (round(step.goal[0] / 0.5), round(step.goal[1] / 0.5))
-        visits[key] = visits.get(key, 0) + 1
-        if visits[key] > settings.max_visits_per_goal:
-            result.stuck_goals.append(step.goal)
-            result.stop_reason = f"stuck: frontier goal {step.goal} reached {visits[key] - 1} times"
-            break
-        robot.drive_to(*step.goal)
-        centroid = step.centroid or step.goal
-        facing = math.atan2(centroid[1] - robot.y, centroid[0] - robot.x)
-        robot.look_around(facing)
     result.final_graph = memory.graph()
     result.final_tracks = memory.tracks()
     result.final_queue = memory.queue()

@@ -122,8 +122,13 @@ class SceneRebuild:
         return not self.tracks_differ and not self.snapshots_differ and not self.baselines_differ
 
 
-def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
-    """Drop the scene's projections and rebuild them from its log; report any difference."""
+def _projections(
+    log: EventLog, scene_id: str
+) -> tuple[
+    dict[str, dict[str, Any]], dict[int, bytes], dict[int, int], dict[int, tuple[int, str, Any]]
+]:
+    """The scene's projections as they stand: track rows, snapshot bodies and their formats by
+    seq, baseline (seq, sha256, body) by version."""
     with read_transaction(log.engine) as connection:
         old_tracks = {
             row.track_id: dict(row._mapping)
@@ -143,6 +148,12 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
                 sa.select(baselines).where(baselines.c.scene_id == scene_id)
             )
         }
+    return old_tracks, old_snapshots, old_formats, old_baselines
+
+
+def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
+    """Drop the scene's projections and rebuild them from its log; report any difference."""
+    old_tracks, old_snapshots, old_formats, old_baselines = _projections(log, scene_id)
     # Replay from seq 0, snapshotting at the same positions as before.
     state, count = SceneState(), 0
     new_snapshots: dict[int, bytes] = {}
