@@ -77,41 +77,7 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
             "coarse fixtures under shared evidence: precision, recall, F1, center error, count MAE (Table 1)",
         ),
     ):
-        parser = protocols.add_parser(protocol, help=help_text)
-        parser.add_argument(
-            "--scenario",
-            nargs="+",
-            type=Path,
-            help="scenario YAML files (default: every shipped one)",
-        )
-        add_world_options(parser)
-        parser.add_argument(
-            "--out",
-            type=Path,
-            default=Path("evaluation/results") / protocol,
-            help=f"folder of results.json, table.md and figures (default: evaluation/results/{protocol})",
-        )
-        parser.add_argument(
-            "--methods", nargs="+", help="method names (default: all of the protocol's)"
-        )
-        parser.add_argument(
-            "--via-service", metavar="URL", help="run PBD-AG through this service's HTTP API"
-        )
-        parser.add_argument(
-            "--token", help="bearer token for --via-service (default: $PBDAG_TOKEN)"
-        )
-        parser.add_argument(
-            "--frames", type=int, help="shorten every scenario to N frames (same story, faster)"
-        )
-        parser.add_argument(
-            "--params",
-            metavar="JSON",
-            help="parameter overrides for every method and world, e.g. "
-            '\'{"visibility": {"min_expected_image_fraction": 0.001}}\' (each method\'s own '
-            "settings still apply on top; default: core/params.py)",
-        )
-        parser.add_argument("--quiet", action="store_true", help="no progress bar")
-        parser.set_defaults(handler=needs_eval_extra(run))
+        add_passive_options(protocols.add_parser(protocol, help=help_text), protocol)
     active = protocols.add_parser(
         "active",
         help="autonomous construction from an empty map: coarse and fine P/R/F1 (Table 3), "
@@ -146,6 +112,48 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     active.add_argument("--params", metavar="JSON", help="overrides of core/params.py")
     active.add_argument("--quiet", action="store_true", help="no progress lines")
     active.set_defaults(handler=needs_eval_extra(run_active))
+
+
+def add_passive_options(parser: argparse.ArgumentParser, protocol: str) -> None:
+    """The options of `eval dynamic` and `eval fixtures`."""
+    parser.add_argument(
+        "--scenario",
+        nargs="+",
+        type=Path,
+        help="scenario YAML files (default: every shipped one)",
+    )
+    add_world_options(parser)
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path("evaluation/results") / protocol,
+        help=f"folder of results.json, table.md and figures (default: evaluation/results/{protocol})",
+    )
+    parser.add_argument(
+        "--methods", nargs="+", help="method names (default: all of the protocol's)"
+    )
+    parser.add_argument(
+        "--via-service", metavar="URL", help="run PBD-AG through this service's HTTP API"
+    )
+    parser.add_argument("--token", help="bearer token for --via-service (default: $PBDAG_TOKEN)")
+    parser.add_argument(
+        "--frames", type=int, help="shorten every scenario to N frames (same story, faster)"
+    )
+    parser.add_argument(
+        "--params",
+        metavar="JSON",
+        help="parameter overrides for every method and world, e.g. "
+        '\'{"visibility": {"min_expected_image_fraction": 0.001}}\' (each method\'s own '
+        "settings still apply on top; default: core/params.py)",
+    )
+    parser.add_argument(
+        "--scenario-overrides",
+        metavar="JSON",
+        help="fields merged into every world's scenario, e.g. "
+        '\'{"detector": {"appearance": {"distinctiveness": 0.3}}}\' (a sensitivity sweep)',
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.set_defaults(handler=needs_eval_extra(run))
 
 
 def add_world_options(parser: argparse.ArgumentParser) -> None:
@@ -212,6 +220,26 @@ def world_note(args: argparse.Namespace) -> dict[str, Any] | None:
         "count": args.generated,
         "world_seeds": list(split_seeds(args.split, args.generated)),
     }
+
+
+def scenario_changes(text: str | None, scenarios: list[Path]) -> dict[str, Any]:
+    """--scenario-overrides as a mapping, checked against every world before anything runs."""
+    from sim.scenario import ScenarioError, load_scenario
+
+    if not text:
+        return {}
+    try:
+        changes = json.loads(text)
+    except json.JSONDecodeError as error:
+        raise ValueError(f"not JSON: {error}") from error
+    if not isinstance(changes, dict):
+        raise ValueError("must be a JSON object of scenario fields")
+    for path in scenarios:
+        try:
+            load_scenario(path, changes)
+        except ScenarioError as error:
+            raise ValueError(f"{path.name}: {error}") from error
+    return changes
 
 
 def parsed_params(text: str | None) -> dict[str, Any]:
@@ -362,6 +390,11 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if overrides:
         methods = with_params(methods, overrides)
+    try:
+        scenario_overrides = scenario_changes(args.scenario_overrides, scenarios)
+    except ValueError as error:
+        print(f"pbdag eval: --scenario-overrides: {error}", file=sys.stderr)
+        return 2
     if args.via_service and args.jobs > 1:
         print("pbdag eval: --jobs: runs through --via-service go one at a time", file=sys.stderr)
         return 2
@@ -376,11 +409,14 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             frames=args.frames,
             jobs=args.jobs,
+            scenario_overrides=scenario_overrides,
         )
     finally:
         if client is not None:
             client.close()
-    written = write_report(protocol, rows, args.out, args.seeds, overrides, world_note(args))
+    written = write_report(
+        protocol, rows, args.out, args.seeds, overrides, world_note(args), scenario_overrides
+    )
     print(console_summary(protocol, rows))
     if args.generated is not None:
         print(interval_table(protocol, rows))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import multiprocessing
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -35,9 +35,15 @@ class Stream:
     batches: tuple[WireBatch, ...]
 
 
-def make_stream(path: Path, seed: int, frames: int | None = None) -> Stream:
-    """Simulate a scenario once per seed (optionally shortened); every method reads its batches."""
-    run = simulate(load_scenario(path, frames=frames), seed)
+def make_stream(
+    path: Path,
+    seed: int,
+    frames: int | None = None,
+    scenario_overrides: Mapping[str, Any] | None = None,
+) -> Stream:
+    """Simulate a scenario once per seed (optionally shortened, or with some of its fields
+    overridden, such as the detector's); every method reads its batches."""
+    run = simulate(load_scenario(path, scenario_overrides, frames=frames), seed)
     return Stream(path, run, tuple(wire_batches(run, FRAMES_PER_BATCH)))
 
 
@@ -172,10 +178,11 @@ def run_stream(
     via_service: Client | None = None,
     progress: bool = True,
     frames: int | None = None,
+    scenario_overrides: Mapping[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Every method on one (scenario, seed) stream; one row of metrics per method."""
     score = dynamic_scores if protocol == "dynamic" else fixture_table_scores
-    stream = make_stream(path, seed, frames)
+    stream = make_stream(path, seed, frames, scenario_overrides)
     rows: list[dict[str, Any]] = []
     with tqdm(
         total=len(methods) * len(stream.batches),
@@ -212,6 +219,7 @@ def run_protocol(
     progress: bool = True,
     frames: int | None = None,
     jobs: int = 1,
+    scenario_overrides: Mapping[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Every method on every (scenario, seed) stream; one row of metrics per run.
 
@@ -224,7 +232,9 @@ def run_protocol(
         return [
             row
             for path, seed in work
-            for row in run_stream(protocol, path, seed, methods, via_service, progress, frames)
+            for row in run_stream(
+                protocol, path, seed, methods, via_service, progress, frames, scenario_overrides
+            )
         ]
     if via_service is not None:
         raise ValueError("jobs: streams through a service run one at a time (use jobs=1)")

@@ -119,10 +119,11 @@ def write_report(
     seeds: Sequence[int],
     params: Mapping[str, Any] | None = None,
     worlds: Mapping[str, Any] | None = None,
+    scenario_overrides: Mapping[str, Any] | None = None,
 ) -> list[Path]:
     """results.json, table.md and the figures under `out`; `params`: the overrides of
     core/params.py every method ran with (none: its defaults); `worlds`: the generated split
-    the run used (none: scenario files)."""
+    the run used (none: scenario files); `scenario_overrides`: fields merged into every world."""
     out.mkdir(parents=True, exist_ok=True)
     scenarios = {
         r["scenario"]: {"file": r["scenario_file"], "sha256": r["scenario_sha256"]} for r in rows
@@ -133,6 +134,7 @@ def write_report(
         "seeds": list(seeds),
         "params": dict(params or {}),
         "generated_worlds": dict(worlds) if worlds else None,
+        "scenario_overrides": dict(scenario_overrides or {}),
         "intervals": intervals_json(protocol, rows),
         "scenarios": scenarios,
         "runs": list(rows),
@@ -149,6 +151,11 @@ def write_report(
         )
         + ".\n\n"
     )
+    if scenario_overrides:
+        header += (
+            "Every world ran with these scenario fields overridden: "
+            f"{json.dumps(scenario_overrides, sort_keys=True)}.\n\n"
+        )
     if worlds:
         header += (
             f"Generated worlds: the {worlds['split']} split, {worlds['count']} worlds.\n\n"

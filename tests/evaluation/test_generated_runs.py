@@ -99,3 +99,20 @@ def test_generated_and_given_worlds_exclude_each_other(
     assert main(["eval", "dynamic", "--generated", "1", "--jobs", "0", "--out", str(tmp_path)]) == 2
     assert "--jobs: 0 is not a positive number" in capsys.readouterr().err
     assert not (tmp_path / "results.json").exists()
+
+
+def test_scenario_overrides_reach_every_world_and_a_bad_one_is_refused_first(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    common = ["eval", "fixtures", "--generated", "1", "--frames", "8", "--quiet"]
+    common += ["--methods", "PBD-AG", "--out", str(tmp_path)]
+    bad = '{"detector": {"appearance": {"distinctiveness": 7}}}'
+    assert main([*common, "--scenario-overrides", bad]) == 2
+    assert "detector.appearance.distinctiveness" in capsys.readouterr().err
+    assert not (tmp_path / "results.json").exists()
+    good = {"detector": {"appearance": {"distinctiveness": 0.3}}}
+    assert main([*common, "--scenario-overrides", json.dumps(good)]) == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    assert results["scenario_overrides"] == good
+    world = load_scenario(results["runs"][0]["scenario_file"], good, frames=8)
+    assert results["runs"][0]["scenario_sha256"] == world.sha256
