@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo serve test lint format openapi vendor bench eval soak fuzz clean
+.PHONY: setup demo serve test lint format openapi vendor bench eval results soak fuzz clean
 
 setup: $(VENV)/.installed
 
@@ -63,10 +63,19 @@ soak: setup  ## the long fault runs: 40 SIGKILLs, a PostgreSQL restart, a poison
 fuzz: setup  ## schemathesis with 200 examples per operation (make test runs 15)
 	PBDAG_FUZZ_EXAMPLES=200 $(BIN)/pytest tests/service/test_schemathesis.py
 
-eval: setup  ## the paper's protocols on every shipped scenario, seeds 7 17 27 (about 40 minutes on 2 cores)
-	$(BIN)/pbdag eval dynamic --out evaluation/results/dynamic
-	$(BIN)/pbdag eval fixtures --out evaluation/results/fixtures
-	$(BIN)/pbdag eval active --out evaluation/results/active
+DEV := evaluation/results/dev
+TEST := evaluation/results/test
+
+eval: setup  ## the paper's protocols on the shipped (development) worlds, seeds 7 17 27
+	$(BIN)/pbdag eval fixtures --jobs 2 --out $(DEV)/fixtures
+	$(BIN)/pbdag eval dynamic --jobs 2 --out $(DEV)/dynamic
+	$(BIN)/pbdag eval active --jobs 2 --seeds 7 --out $(DEV)/active
+
+results: eval  ## and on the generated test split, then the README's tables (see evaluation/README.md for durations)
+	$(BIN)/pbdag eval fixtures --generated 30 --split test --jobs 2 --out $(TEST)/fixtures
+	$(BIN)/pbdag eval dynamic --generated 30 --split test --jobs 2 --out $(TEST)/dynamic
+	$(BIN)/pbdag eval active --generated 6 --split test --jobs 2 --out $(TEST)/active
+	$(BIN)/python -m evaluation.publish --dev $(DEV) --test $(TEST)
 
 clean:
 	rm -rf $(VENV) data bench/results evaluation/results .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,66 @@
+"""The published tables come from the runs' results.json, into the README's marked block only."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from evaluation.publish import END, START, main
+
+
+def fixture_run(scenario: str, f1: float) -> dict[str, Any]:
+    return {
+        "scenario": scenario,
+        "seed": 7,
+        "method": "PBD-AG",
+        "precision": 1.0,
+        "recall": f1,
+        "f1": f1,
+        "center_error": 0.05,
+        "count_mae": 0.0,
+    }
+
+
+def write(folder: Path, runs: list[dict[str, Any]], worlds: dict[str, Any] | None) -> None:
+    folder.mkdir(parents=True)
+    document = {"code_version": "abc", "seeds": [7], "generated_worlds": worlds, "runs": runs}
+    (folder / "results.json").write_text(json.dumps(document))
+    (folder / "table.md").write_text("# Coarse fixtures\n\nthe run's own report\n")
+
+
+def test_publish_writes_test_and_development_tables_between_the_markers(tmp_path: Path) -> None:
+    worlds = {"split": "test", "count": 3, "world_seeds": [1, 2, 3]}
+    test_runs = [fixture_run(f"gen-{k}", f1) for k, f1 in enumerate([0.6, 0.8, 1.0])]
+    write(tmp_path / "test" / "fixtures", test_runs, worlds)
+    write(tmp_path / "dev" / "fixtures", [fixture_run("office", 0.9)], None)
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# Title\n\nbefore\n{START}\nold figures\n{END}\nafter\n")
+    page = tmp_path / "RESULTS.md"
+    args = ["--test", str(tmp_path / "test"), "--dev", str(tmp_path / "dev")]
+    assert main([*args, "--readme", str(readme), "--page", str(page)]) == 0
+    text = readme.read_text()
+    assert text.startswith("# Title\n\nbefore\n") and text.endswith(f"{END}\nafter\n")
+    assert "old figures" not in text
+    assert "**Test split** (3 generated test-split worlds, seeds 7, code abc)" in text
+    assert "| PBD-AG | 1.000 [1.000, 1.000] | .800 [" in text
+    assert "**Development** (1 shipped worlds" in text
+    assert "Test split: not run yet." in text  # the dynamic and active runs are absent
+    assert "- PBD-AG: .951 / .802 / .868 / .320 / .356" in text
+    assert "the run's own report" in page.read_text()
+
+
+def test_publish_refuses_without_runs_or_without_markers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    readme = tmp_path / "README.md"
+    readme.write_text("no markers\n")
+    args = ["--test", str(tmp_path / "t"), "--dev", str(tmp_path / "d"), "--readme", str(readme)]
+    assert main([*args, "--page", str(tmp_path / "R.md")]) == 2
+    assert "no results.json" in capsys.readouterr().err
+    write(tmp_path / "d" / "fixtures", [fixture_run("office", 0.9)], None)
+    assert main([*args, "--page", str(tmp_path / "R.md")]) == 2
+    assert "has no <!-- results:start -->" in capsys.readouterr().err
+    assert readme.read_text() == "no markers\n"
