@@ -75,6 +75,7 @@ results: eval  ## and on the generated test split, then the README's tables (see
 	$(BIN)/pbdag eval fixtures --generated 30 --split test --jobs 2 --out $(TEST)/fixtures
 	$(BIN)/pbdag eval dynamic --generated 30 --split test --jobs 2 --out $(TEST)/dynamic
 	$(BIN)/pbdag eval active --generated 6 --split test --jobs 2 --out $(TEST)/active
+	$(BIN)/python -m evaluation.sweep --jobs 2 --out $(DEV)/sweep
 	$(BIN)/python -m evaluation.publish --dev $(DEV) --test $(TEST)
 
 clean:

@@ -23,6 +23,7 @@ from evaluation.world_intervals import interval_table
 REPO = Path(__file__).resolve().parents[1]
 PROTOCOLS = ("fixtures", "dynamic", "active")
 START, END = "<!-- results:start -->", "<!-- results:end -->"
+SWEEP_START, SWEEP_END = "<!-- sweep:start -->", "<!-- sweep:end -->"
 TITLES = {
     "fixtures": "Table 1: coarse fixtures under shared evidence",
     "dynamic": "Table 2: dynamic memory",
@@ -118,13 +119,13 @@ def block(test: Path, dev: Path) -> str:
     )
 
 
-def replace_block(text: str, body: str) -> str:
+def replace_block(text: str, body: str, start: str = START, end: str = END) -> str:
     """`text` with the part between the markers replaced by `body`."""
-    if START not in text or END not in text:
-        raise ValueError(f"the README has no {START} ... {END} block")
-    head, rest = text.split(START, 1)
-    _, tail = rest.split(END, 1)
-    return f"{head}{START}\n{body}{END}{tail}"
+    if start not in text or end not in text:
+        raise ValueError(f"no {start} ... {end} block")
+    head, rest = text.split(start, 1)
+    _, tail = rest.split(end, 1)
+    return f"{head}{start}\n{body}{end}{tail}"
 
 
 def results_page(test: Path, dev: Path) -> str:
@@ -150,6 +151,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     parser.add_argument("--readme", type=Path, default=REPO / "README.md")
     parser.add_argument("--page", type=Path, default=REPO / "evaluation/RESULTS.md")
+    parser.add_argument(
+        "--guide",
+        type=Path,
+        default=REPO / "evaluation/README.md",
+        help="where the appearance sweep's table goes (from DEV/sweep/table.md)",
+    )
     args = parser.parse_args(argv)
     if not any(load(args.test, p) or load(args.dev, p) for p in PROTOCOLS):
         print(
@@ -165,6 +172,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     args.page.write_text(results_page(args.test, args.dev))
     print(f"wrote {args.readme} and {args.page}")
+    sweep = args.dev / "sweep" / "table.md"
+    if sweep.is_file():
+        try:
+            text = replace_block(args.guide.read_text(), sweep.read_text(), SWEEP_START, SWEEP_END)
+        except ValueError as error:
+            print(f"evaluation.publish: {args.guide}: {error}", file=sys.stderr)
+            return 2
+        args.guide.write_text(text)
+        print(f"wrote the appearance sweep into {args.guide}")
     return 0
 
 

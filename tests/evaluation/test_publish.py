@@ -62,5 +62,5 @@ def test_publish_refuses_without_runs_or_without_markers(
     assert "no results.json" in capsys.readouterr().err
     write(tmp_path / "d" / "fixtures", [fixture_run("office", 0.9)], None)
     assert main([*args, "--page", str(tmp_path / "R.md")]) == 2
-    assert "has no <!-- results:start -->" in capsys.readouterr().err
+    assert "no <!-- results:start --> ... <!-- results:end --> block" in capsys.readouterr().err
     assert readme.read_text() == "no markers\n"
