@@ -23,7 +23,7 @@ from pydantic import (
     TypeAdapter,
     ValidationError,
 )
-from pydantic_core import PydanticCustomError
+from pydantic_core import ErrorDetails, PydanticCustomError
 
 from core.errors import field_path
 from pbdag_errors import Refused
@@ -86,31 +86,26 @@ def _shown(value: Any) -> str:
     return repr(json.loads(json.dumps(value))) if isinstance(value, list | dict) else repr(value)
 
 
-def _reason(error: Any) -> str:
+def _reason(error: ErrorDetails) -> str:
     """Pydantic's message for one error, in the words of the old field checks."""
     kind, ctx, got = error["type"], error.get("ctx") or {}, _shown(error["input"])
     bounds = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<"}
     bounds["less_than_equal"] = "<="
     if kind in bounds:
-        limit = next(iter(ctx.values()))
-        return f"must be {bounds[kind]} {limit}, got {got}"
+        return f"must be {bounds[kind]} {next(iter(ctx.values()))}, got {got}"
     if kind == "missing":
         return "required"
     if kind == "unexpected_keyword_argument":
         return "unknown field"
-    if kind == "too_short" or kind == "too_long":
-        least = "at least" if kind == "too_short" else "at most"
-        items = ctx["min_length" if kind == "too_short" else "max_length"]
-        return f"expected {least} {items} entries, got {got}"
+    if kind == "too_short":
+        return f"expected at least {ctx['min_length']} entries, got {got}"
+    if kind == "too_long":
+        return f"expected at most {ctx['max_length']} entries, got {got}"
     if kind == "dataclass_type":
         return f"expected a mapping of fields, got {got}"
-    if kind == "string_pattern_mismatch":
-        return (
-            f"expected a non-empty string, got {got}"
-            if ctx["pattern"] == r"\S"
-            else f"{got}: {error['msg'].lower()}"
-        )
-    message = str(error["msg"]).removeprefix("Value error, ")
+    if kind == "string_pattern_mismatch":  # the one pattern: Text
+        return f"expected a non-empty string, got {got}"
+    message = error["msg"].removeprefix("Value error, ")
     if kind == "scenario_field" or kind == "value_error":
         return message
     return f"{message.replace('Input should be', 'expected')}, got {got}"
@@ -131,12 +126,14 @@ def validated(
     except ValidationError as error:
         first = error.errors()[0]
         location = [part for part in first["loc"] if not str(part).startswith("function-")]
+        field = str((first.get("ctx") or {}).get("field", ""))  # named by a part's own check
+        if first["type"] == "missing" and location and isinstance(location[-1], int):
+            # A list too short for its fixed length: pydantic reports the first missing entry.
+            location.pop()
+            reason = f"too few entries, got {_shown(first['input'])}"
+        else:
+            reason = _reason(first)
         path = field_path(location) or ""
-        field = (
-            str((first.get("ctx") or {}).get("field", ""))
-            if first["type"] == "scenario_field"
-            else ""
-        )
-        if field:
+        if first["type"] == "scenario_field":
             path += field if field.startswith("[") or not path else f".{field}"
-        raise ScenarioError(f"{path or 'scenario'}: {_reason(first)}") from None
+        raise ScenarioError(f"{path or 'scenario'}: {reason}") from None

@@ -23,8 +23,6 @@ from sim.scenario_fields import (
 )
 from sim.world import Box
 
-EVENT_TYPES = ("appear", "move", "disappear", "transfer")
-
 
 @dataclass(frozen=True)
 class CameraSpec(CameraModel):
