@@ -59,6 +59,7 @@ def field_error(field: str, message: str) -> PydanticCustomError:
 
 
 def ordered(pair: tuple[Any, Any]) -> tuple[Any, Any]:
+    """A [low, high] pair with low <= high."""
     if pair[0] > pair[1]:
         raise ValueError(f"low {pair[0]} exceeds high {pair[1]}")
     return pair
@@ -68,41 +69,64 @@ FractionPair = Annotated[tuple[Fraction, Fraction], AfterValidator(ordered)]  # 
 CountPair = Annotated[tuple[Count, Count], AfterValidator(ordered)]
 
 
-def _keep_nulls(value: Any, path: tuple[str, ...], nullable: set[tuple[str, ...]]) -> Any:
+def _nulls_dropped(value: Any, path: tuple[str, ...], nullable: set[tuple[str, ...]]) -> Any:
     """The file's values with `null` dropped (it counts as absent) except where it means None."""
     if isinstance(value, Mapping):
         return {
-            str(key): _keep_nulls(item, (*path, str(key)), nullable)
+            str(key): _nulls_dropped(item, (*path, str(key)), nullable)
             for key, item in value.items()
             if item is not None or (*path, str(key)) in nullable
         }
     if isinstance(value, list | tuple):
-        return [_keep_nulls(item, path, nullable) for item in value]
+        return [_nulls_dropped(item, path, nullable) for item in value]
     return value
 
 
-def _shown(value: Any) -> str:
-    """A value as the file would spell it."""
-    return repr(json.loads(json.dumps(value))) if isinstance(value, list | dict) else repr(value)
+def _schema_at(schema: dict[str, Any], location: list[str | int]) -> dict[str, Any]:
+    """The JSON schema of the field at `location` ({} where the walk cannot follow)."""
+    node = schema
+    for part in [*location, None]:
+        while "$ref" in node or "anyOf" in node:  # a part, or an optional one
+            if "$ref" in node:
+                node = schema["$defs"][node["$ref"].rsplit("/", 1)[-1]]
+            else:
+                node = next(item for item in node["anyOf"] if item.get("type") != "null")
+        if part is None:
+            return node
+        if isinstance(part, int):
+            node = (node.get("prefixItems") or [node.get("items", {})] * (part + 1))[part]
+        else:
+            keyed = [*node.get("patternProperties", {}).values(), node.get("additionalProperties")]
+            node = node.get("properties", {}).get(part) or keyed[0] or {}
+    return node
 
 
-def _reason(error: ErrorDetails) -> str:
-    """Pydantic's message for one error, in the words of the old field checks."""
-    kind, ctx, got = error["type"], error.get("ctx") or {}, _shown(error["input"])
-    bounds = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<"}
-    bounds["less_than_equal"] = "<="
-    if kind in bounds:
-        return f"must be {bounds[kind]} {next(iter(ctx.values()))}, got {got}"
+def _reason(error: ErrorDetails, field: dict[str, Any], part: dict[str, Any]) -> str:
+    """One error in words: `field` is the schema of the offending field, `part` of its part."""
+    kind, ctx, got = error["type"], error.get("ctx") or {}, repr(error["input"])
+    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        low = field.get("minimum", field.get("exclusiveMinimum"))
+        high = field.get("maximum", field.get("exclusiveMaximum"))
+        if low is not None and high is not None:
+            opening = "(" if "exclusiveMinimum" in field else "["
+            return f"{got} is outside {opening}{low}, {high}{')' if 'exclusiveMaximum' in field else ']'}"
+        sign = {"greater_than": ">", "greater_than_equal": ">=", "less_than": "<"}.get(kind, "<=")
+        return f"must be {sign} {next(iter(ctx.values()))}, got {got}"
     if kind == "missing":
         return "required"
     if kind == "unexpected_keyword_argument":
-        return "unknown field"
+        return f"unknown field (known here: {', '.join(sorted(part.get('properties', {})))})"
+    if kind in ("too_short", "too_long") and field.get("minItems") == field.get("maxItems"):
+        numbers = all(item.get("type") == "number" for item in field.get("prefixItems", [{}]))
+        return f"expected a list of {field['minItems']} {'numbers' if numbers else 'entries'}, got {got}"
     if kind == "too_short":
         return f"expected at least {ctx['min_length']} entries, got {got}"
     if kind == "too_long":
         return f"expected at most {ctx['max_length']} entries, got {got}"
-    if kind == "dataclass_type":
+    if kind in ("dataclass_type", "dict_type"):
         return f"expected a mapping of fields, got {got}"
+    if kind in ("list_type", "tuple_type"):
+        return f"expected a list, got {got}"
     if kind == "string_pattern_mismatch":  # the one pattern: Text
         return f"expected a non-empty string, got {got}"
     message = error["msg"].removeprefix("Value error, ")
@@ -116,7 +140,7 @@ def validated(
 ) -> T:
     """`data` checked by `adapter`; `null` is absent except at the `nullable` key paths."""
     try:
-        text = json.dumps(_keep_nulls(data, (), nullable))
+        text = json.dumps(_nulls_dropped(data, (), nullable))
     except (TypeError, ValueError) as error:  # a YAML date or set: no value of a scenario
         raise ScenarioError(
             f"scenario: only numbers, strings, lists and mappings ({error})"
@@ -126,14 +150,14 @@ def validated(
     except ValidationError as error:
         first = error.errors()[0]
         location = [part for part in first["loc"] if not str(part).startswith("function-")]
-        field = str((first.get("ctx") or {}).get("field", ""))  # named by a part's own check
         if first["type"] == "missing" and location and isinstance(location[-1], int):
             # A list too short for its fixed length: pydantic reports the first missing entry.
             location.pop()
-            reason = f"too few entries, got {_shown(first['input'])}"
-        else:
-            reason = _reason(first)
+            first["type"] = "too_short"
+        schema = adapter.json_schema()
+        field, part = _schema_at(schema, location), _schema_at(schema, location[:-1])
         path = field_path(location) or ""
         if first["type"] == "scenario_field":
-            path += field if field.startswith("[") or not path else f".{field}"
-        raise ScenarioError(f"{path or 'scenario'}: {reason}") from None
+            named = str((first.get("ctx") or {})["field"])  # by the part's own check
+            path += named if named.startswith("[") or not path else f".{named}"
+        raise ScenarioError(f"{path or 'scenario'}: {_reason(first, field, part)}") from None

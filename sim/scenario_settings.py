@@ -107,7 +107,8 @@ class TrajectorySpec:
         others = set().union(*(fields for fields, _ in _TYPE_FIELDS.values())) - known
         for key in data:
             if key in others:
-                raise field_error(key, f"unknown field for a {kind} trajectory")
+                listed = ", ".join(sorted(known))
+                raise field_error(key, f"unknown field (known for {kind!r}: {listed})")
         for key in required:
             if key not in data:
                 raise field_error(key, "required")
