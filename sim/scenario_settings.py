@@ -59,6 +59,9 @@ def _circle(value: Any) -> Any:
     return value if isinstance(value, list) else [value, value]
 
 
+Radii = Annotated[tuple[Positive, Positive], BeforeValidator(_circle)]
+
+
 def _targets(value: Any) -> Any:
     """An orbit's `look_at`: one [x, y, z] point, or a list of them visited in turn."""
     return value if isinstance(value, list) and value and isinstance(value[0], list) else [value]
@@ -88,10 +91,7 @@ class TrajectorySpec:
     loops: PositiveInt = 1
     points: Annotated[tuple[Waypoint, ...], Field(min_length=2)] = ()
     center: Vec2 = (0.0, 0.0)
-    radii: Annotated[tuple[Positive, Positive], Field(alias="radius"), BeforeValidator(_circle)] = (
-        0.0,
-        0.0,
-    )  # along x and y
+    radii: Annotated[Radii, Field(alias="radius")] = (0.0, 0.0)  # along x and y
     look_at: Annotated[tuple[Vec3, ...], BeforeValidator(_targets)] = ()
     look_blocks: PositiveInt = 1
     start_angle: Number = 0.0
