@@ -11,13 +11,13 @@ from __future__ import annotations
 import bisect
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated
 
-from sim.scenario_fields import ScenarioError, Section, count, sequence, text, vector
+from pydantic import Field
+
+from sim.scenario_fields import CHECKED, Count, ScenarioError, Size3, Text, Vec2, Vec3, field_error
 from sim.world import Box
 
-Vec2 = tuple[float, float]
-Vec3 = tuple[float, float, float]
 # An adult seen as one box: shoulder width, chest depth, height [m].
 DEFAULT_PERSON_SIZE: Vec3 = (0.45, 0.30, 1.70)
 
@@ -26,7 +26,8 @@ DEFAULT_PERSON_SIZE: Vec3 = (0.45, 0.30, 1.70)
 class Keyframe:
     """Where a person stands at a frame."""
 
-    frame: int
+    __pydantic_config__ = CHECKED
+    frame: Count
     at: Vec2
 
 
@@ -34,10 +35,16 @@ class Keyframe:
 class PersonSpec:
     """One walker: a box moving linearly between keyframes, present from first to last."""
 
-    id: str
-    keyframes: tuple[Keyframe, ...]
-    size: Vec3 = DEFAULT_PERSON_SIZE
-    detected_as: str | None = None  # the class a detector reports, None: never detected
+    __pydantic_config__ = CHECKED
+    id: Text
+    keyframes: Annotated[tuple[Keyframe, ...], Field(min_length=2)]  # in frame order
+    size: Size3 = DEFAULT_PERSON_SIZE
+    detected_as: Text | None = None  # the class a detector reports, None: never detected
+
+    def __post_init__(self) -> None:
+        for index in range(1, len(self.keyframes)):
+            if self.keyframes[index].frame < self.keyframes[index - 1].frame:
+                raise field_error(f"keyframes[{index}].frame", "earlier than the one before")
 
     def box_at(self, frame_index: int) -> Box | None:
         """The person's box at this frame, None while they are not in the room."""
@@ -65,36 +72,6 @@ class PersonSpec:
             if math.hypot(x1 - x0, y1 - y0) > 1e-9:
                 return math.atan2(y1 - y0, x1 - x0)
         return 0.0
-
-
-def _keyframe(value: Any, where: str) -> Keyframe:
-    section = Section(value, where)
-    key = Keyframe(
-        frame=section.get("frame", count), at=section.get("at", lambda i, a: vector(i, a, 2))
-    )
-    section.finish()
-    return key
-
-
-def parse_person(value: Any, where: str) -> PersonSpec:
-    """One entry of `people`."""
-    section = Section(value, where)
-    keyframes = tuple(section.get("keyframes", lambda item, at: sequence(item, at, _keyframe)))
-    spec = PersonSpec(
-        id=section.get("id", text),
-        keyframes=keyframes,
-        size=section.get(
-            "size", lambda item, at: vector(item, at, 3, positive_only=True), DEFAULT_PERSON_SIZE
-        ),
-        detected_as=section.get("detected_as", text, None),
-    )
-    section.finish()
-    if len(keyframes) < 2:
-        raise ScenarioError(f"{where}.keyframes: needs at least two keyframes")
-    for index in range(1, len(keyframes)):
-        if keyframes[index].frame < keyframes[index - 1].frame:
-            raise ScenarioError(f"{where}.keyframes[{index}].frame: earlier than the one before")
-    return spec
 
 
 def check_people(

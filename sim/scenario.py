@@ -5,35 +5,37 @@ from __future__ import annotations
 import copy
 import re
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import yaml
+from pydantic import AfterValidator, TypeAdapter
 
-from sim.detector_settings import DetectorSpec, PhantomSpec, parse_detector
-from sim.people import PersonSpec, check_people, parse_person
+from sim.detector_settings import DetectorSpec, PhantomSpec
+from sim.people import PersonSpec, check_people
 from sim.scenario_checks import check_events, check_layout, check_trajectory
-from sim.scenario_fields import ScenarioError, Section, positive, sequence, vector
+from sim.scenario_fields import (
+    CHECKED,
+    Count,
+    Positive,
+    PositiveInt,
+    ScenarioError,
+    Size3,
+    Text,
+    Vec3,
+    validated,
+)
 from sim.scenario_parts import (
     CameraSpec,
+    EventEntry,
     EventSpec,
     FixtureSpec,
     ObjectSpec,
     OccluderSpec,
     WallSpec,
-    parse_camera,
-    parse_event,
-    parse_fixture,
-    parse_object,
-    parse_occluder,
-    parse_wall,
 )
-from sim.scenario_settings import (
-    BackgroundSpec,
-    TrajectorySpec,
-    parse_background,
-    parse_trajectory,
-)
+from sim.scenario_settings import REPO_ROOT, BackgroundSpec, TrajectorySpec
 from sim.scenario_spec import Scenario
 
 __all__ = [
@@ -55,14 +57,62 @@ __all__ = [
     "scenario_from_dict",
 ]
 
-Vec3 = tuple[float, float, float]
 # Event recall counts a change recalled when the memory reflects it within this many batches of
 # its first observable batch: 10 batches of two frames at 10 Hz is two seconds.
 DEFAULT_EVENT_LATENCY_BATCHES = 10
-# Recorded backgrounds name their data folder relative to the repository root (the folder
-# holding `sim/`), so one spelling works whichever folder the scenario file sits in.
-REPO_ROOT = Path(__file__).resolve().parent.parent
 NAME_PATTERN = re.compile(r"^[A-Za-z0-9._-]+$")  # names end up inside wire batch ids
+
+
+def _batch_id_safe(name: str) -> str:
+    if not NAME_PATTERN.match(name):
+        raise ValueError(
+            f"must be a non-empty string of letters, digits, '.', '_', '-', got {name!r}"
+        )
+    return name
+
+
+@dataclass(frozen=True)
+class Room:
+    """The synthetic room: its x and y extents and its height [m]."""
+
+    __pydantic_config__ = CHECKED
+    size: Size3
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """How the evaluation judges this world."""
+
+    __pydantic_config__ = CHECKED
+    event_latency_batches: PositiveInt = DEFAULT_EVENT_LATENCY_BATCHES
+
+
+@dataclass(frozen=True)
+class ScenarioFile:
+    """A scenario file as written; `scenario_from_dict` checks its parts against each other."""
+
+    __pydantic_config__ = CHECKED
+    name: Annotated[Text, AfterValidator(_batch_id_safe)]
+    seed: Count
+    camera: CameraSpec
+    fixtures: tuple[FixtureSpec, ...]
+    frames: PositiveInt | None = None  # required, unless a recorded background selects them
+    frame_period: Positive = 0.1  # [s]
+    room: Room | None = None  # required, unless a recorded background replaces it
+    walls: tuple[WallSpec, ...] = ()
+    occluders: tuple[OccluderSpec, ...] = ()
+    objects: tuple[ObjectSpec, ...] = ()
+    events: tuple[EventEntry, ...] = ()
+    trajectory: TrajectorySpec | None = None  # required without a recorded background
+    background: BackgroundSpec | None = None
+    detector: DetectorSpec = field(default_factory=DetectorSpec)
+    people: tuple[PersonSpec, ...] = ()
+    evaluation: Evaluation = field(default_factory=Evaluation)
+
+
+_FILE = TypeAdapter(ScenarioFile)
+# Where `null` means None, not "the default": no fixture segmenter, no appearance vector.
+_NULL_MEANS_NONE = {("detector", "fixtures"), ("detector", "appearance", "dim")}
 
 
 class _UniqueKeyLoader(yaml.SafeLoader):
@@ -171,37 +221,11 @@ def _shortened(raw: dict[str, Any], frames: int) -> dict[str, Any]:
 
 def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Scenario:
     """Validate an already-parsed scenario mapping."""
-    top = Section(raw, "")
-    name = top.get("name", _name)
-    seed = top.get(
-        "seed", lambda value, where: int(positive(value, where, integer=True, zero=True))
-    )
-    camera = top.get("camera", parse_camera)
-    background = top.get(
-        "background", lambda value, where: parse_background(value, where, REPO_ROOT), None
-    )
-    room_size = top.get("room", _room, None)
+    file = validated(_FILE, raw, _NULL_MEANS_NONE)
+    room_size = file.room.size if file.room else None
+    frames, trajectory, background = file.frames, file.trajectory, file.background
     if room_size is None and background is None:
         raise ScenarioError("room: required (only a recorded background may leave it out)")
-    walls = tuple(top.get("walls", lambda value, where: sequence(value, where, parse_wall), []))
-    fixtures = tuple(
-        top.get("fixtures", lambda value, where: sequence(value, where, parse_fixture))
-    )
-    occluders = tuple(
-        top.get("occluders", lambda value, where: sequence(value, where, parse_occluder), [])
-    )
-    listed = tuple(
-        top.get("objects", lambda value, where: sequence(value, where, parse_object), [])
-    )
-    trajectory: TrajectorySpec | None = top.get("trajectory", parse_trajectory, None)
-    events_and_new = top.get("events", lambda value, where: sequence(value, where, parse_event), [])
-    detector = top.get("detector", parse_detector, None) or parse_detector({}, "detector")
-    people = tuple(top.get("people", lambda value, where: sequence(value, where, parse_person), []))
-    latency_bound = top.get("evaluation", _evaluation, DEFAULT_EVENT_LATENCY_BATCHES)
-    frames = top.get("frames", lambda value, where: int(positive(value, where, integer=True)), None)
-    frame_period = top.get("frame_period", positive, 0.1)
-    top.finish()
-
     if background is not None:
         selected = len(range(*background.frames))
         if frames is not None and frames != selected:
@@ -215,6 +239,9 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
         if trajectory is None:
             raise ScenarioError("trajectory: required without a recorded background")
 
+    walls, fixtures, occluders, listed = file.walls, file.fixtures, file.occluders, file.objects
+    detector, people = file.detector, file.people
+    events_and_new = [(entry.spec(), entry.defined()) for entry in file.events]
     listed_ids = {spec.id for spec in listed}
     for index, (event, defined) in enumerate(events_and_new):
         if defined is not None and defined.id in listed_ids:
@@ -243,10 +270,10 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
     # A stable sort keeps same-frame events in file order.
     events = tuple(sorted(file_order, key=lambda event: event.frame))
     scenario = Scenario(
-        name=name,
-        seed=seed,
+        name=file.name,
+        seed=file.seed,
         frames=frames,
-        camera=camera,
+        camera=file.camera,
         room_size=room_size or (0.0, 0.0, 0.0),
         walls=walls,
         fixtures=fixtures,
@@ -256,36 +283,15 @@ def scenario_from_dict(raw: Mapping[str, Any], source: Path | None = None) -> Sc
         events=events,
         detector=detector,
         background=background,
-        frame_period=frame_period,
+        frame_period=file.frame_period,
         people=people,
-        event_latency_batches=latency_bound,
+        event_latency_batches=file.evaluation.event_latency_batches,
         source=source,
         raw=copy.deepcopy(dict(raw)),
     )
     if trajectory is not None:
         check_trajectory(scenario)
     return scenario
-
-
-def _name(value: Any, where: str) -> str:
-    """A scenario name usable inside batch ids."""
-    if not isinstance(value, str) or not NAME_PATTERN.match(value):
-        raise ScenarioError(
-            f"{where}: must be a non-empty string of letters, digits, '.', '_', '-'"
-        )
-    return value
-
-
-def _evaluation(value: Any, where: str) -> int:
-    """The `evaluation` section: how the evaluation judges this world."""
-    section = Section(value, where)
-    bound = section.get(
-        "event_latency_batches",
-        lambda item, at: int(positive(item, at, integer=True)),
-        DEFAULT_EVENT_LATENCY_BATCHES,
-    )
-    section.finish()
-    return bound
 
 
 def check_phantoms(phantoms: tuple[PhantomSpec, ...], room_size: Vec3 | None) -> None:
@@ -297,13 +303,3 @@ def check_phantoms(phantoms: tuple[PhantomSpec, ...], room_size: Vec3 | None) ->
             raise ScenarioError(
                 f"detector.phantoms[{index}].at: {list(phantom.at)} is outside the room"
             )
-
-
-def _room(value: Any, where: str) -> tuple[float, float, float]:
-    """The room's x and y extents and height."""
-    section = Section(value, where)
-    size: tuple[float, float, float] = section.get(
-        "size", lambda item, at: vector(item, at, 3, positive_only=True)
-    )
-    section.finish()
-    return size

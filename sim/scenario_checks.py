@@ -7,8 +7,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from sim.scenario_fields import ScenarioError
-from sim.scenario_parts import EventSpec, FixtureSpec, ObjectSpec, OccluderSpec, Vec2, WallSpec
+from sim.scenario_fields import ScenarioError, Vec2
+from sim.scenario_parts import EventSpec, FixtureSpec, ObjectSpec, OccluderSpec, WallSpec
 from sim.scenario_spec import Scenario
 from sim.trajectory import path_samples, trajectory_poses
 from sim.world import Box

@@ -3,68 +3,61 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
-from typing import Any
+from dataclasses import dataclass, field, fields
+from typing import Annotated, Literal
+
+from pydantic import Field
 
 from sim.camera import CameraModel
 from sim.scenario_fields import (
-    ScenarioError,
-    Section,
-    boolean,
-    count,
-    number,
-    positive,
-    text,
-    vector,
+    CHECKED,
+    Count,
+    Flag,
+    Number,
+    Positive,
+    PositiveInt,
+    Size3,
+    Text,
+    Vec2,
+    field_error,
 )
 from sim.world import Box
-
-Vec2 = tuple[float, float]
-Vec3 = tuple[float, float, float]
-EVENT_TYPES = ("appear", "move", "disappear", "transfer")
 
 
 @dataclass(frozen=True)
 class CameraSpec(CameraModel):
     """The renderer's camera plus the eye height synthetic trajectories walk at."""
 
-    eye_height: float = 1.2
+    __pydantic_config__ = CHECKED
+    width: PositiveInt = 640  # pixels
+    height: PositiveInt = 480
+    fx: Positive = 525.0  # focal lengths [px]
+    fy: Positive = 525.0
+    cx: Number = 319.5  # principal point [px]: may lie off the image (a cropped sensor)
+    cy: Number = 239.5
+    min_depth: Positive = 0.3  # the sensor's valid range [m]
+    max_depth: Positive = 6.0
+    eye_height: Positive = 1.2  # [m] above the floor
+
+    def __post_init__(self) -> None:
+        if self.min_depth >= self.max_depth:
+            raise field_error("max_depth", "must exceed min_depth")
 
     def model(self) -> CameraModel:
         """The renderer's camera model alone (what frames carry and runs save)."""
         return CameraModel(**{f.name: getattr(self, f.name) for f in fields(CameraModel)})
 
 
-def parse_camera(value: Any, where: str) -> CameraSpec:
-    """The `camera` section."""
-    section, default = Section(value, where), CameraSpec()
-    side = lambda item, at: int(positive(item, at, integer=True))  # noqa: E731
-    spec = CameraSpec(
-        width=section.get("width", side, default.width),
-        height=section.get("height", side, default.height),
-        fx=section.get("fx", positive, default.fx),
-        fy=section.get("fy", positive, default.fy),
-        cx=section.get("cx", number, default.cx),
-        cy=section.get("cy", number, default.cy),
-        eye_height=section.get("eye_height", positive, default.eye_height),
-        min_depth=section.get("min_depth", positive, default.min_depth),
-        max_depth=section.get("max_depth", positive, default.max_depth),
-    )
-    section.finish()
-    if spec.min_depth >= spec.max_depth:
-        raise ScenarioError(f"{where}.max_depth: must exceed min_depth")
-    return spec
-
-
 @dataclass(frozen=True)
 class FixtureSpec:
     """Furniture standing on the floor; objects rest on its top."""
 
-    id: str
-    label: str
-    center: Vec2
-    size: Vec3
-    yaw: float = 0.0
+    __pydantic_config__ = CHECKED
+    id: Text
+    label: Text
+    center: Vec2  # of the footprint, room frame [m]
+    size: Size3
+    yaw: Number = 0.0
 
     def box(self) -> Box:
         """The fixture's world box."""
@@ -76,11 +69,12 @@ class FixtureSpec:
 class OccluderSpec:
     """A floor-standing box that hides things but is never detected (chairs, pillars)."""
 
-    id: str
-    label: str
+    __pydantic_config__ = CHECKED
+    id: Text
     center: Vec2
-    size: Vec3
-    yaw: float = 0.0
+    size: Size3
+    yaw: Number = 0.0
+    label: Text = field(default="occluder", kw_only=True)
 
     def box(self) -> Box:
         """The occluder's world box."""
@@ -88,42 +82,19 @@ class OccluderSpec:
         return Box(self.id, self.label, center, self.size, self.yaw, kind="occluder")
 
 
-def _floor_box_fields(section: Section) -> tuple[str, Vec2, Vec3, float]:
-    """id, center, size and yaw shared by fixtures and occluders."""
-    return (
-        section.get("id", text),
-        section.get("center", lambda item, at: vector(item, at, 2)),
-        section.get("size", lambda item, at: vector(item, at, 3, positive_only=True)),
-        section.get("yaw", number, 0.0),
-    )
-
-
-def parse_fixture(value: Any, where: str) -> FixtureSpec:
-    """One entry of `fixtures`."""
-    section = Section(value, where)
-    box_id, center, size, yaw = _floor_box_fields(section)
-    spec = FixtureSpec(box_id, section.get("label", text), center, size, yaw)
-    section.finish()
-    return spec
-
-
-def parse_occluder(value: Any, where: str) -> OccluderSpec:
-    """One entry of `occluders`."""
-    section = Section(value, where)
-    box_id, center, size, yaw = _floor_box_fields(section)
-    spec = OccluderSpec(box_id, section.get("label", text, "occluder"), center, size, yaw)
-    section.finish()
-    return spec
-
-
 @dataclass(frozen=True)
 class WallSpec:
     """An interior wall segment from floor to `height`: an occluder, never detected."""
 
-    start: Vec2
-    end: Vec2
-    height: float
-    thickness: float = 0.1
+    __pydantic_config__ = CHECKED
+    start: Annotated[Vec2, Field(alias="from")]
+    end: Annotated[Vec2, Field(alias="to")]
+    height: Positive
+    thickness: Positive = 0.1
+
+    def __post_init__(self) -> None:
+        if self.start == self.end:
+            raise field_error("to", "the wall has zero length")
 
     def box(self, index: int) -> Box:
         """The wall as a thin turned box."""
@@ -135,53 +106,18 @@ class WallSpec:
         return Box(f"wall_{index}", "wall", center, size, yaw, kind="occluder")
 
 
-def parse_wall(value: Any, where: str) -> WallSpec:
-    """One entry of `walls`."""
-    section = Section(value, where)
-    spec = WallSpec(
-        start=section.get("from", lambda item, at: vector(item, at, 2)),
-        end=section.get("to", lambda item, at: vector(item, at, 2)),
-        height=section.get("height", positive),
-        thickness=section.get("thickness", positive, 0.1),
-    )
-    section.finish()
-    if spec.start == spec.end:
-        raise ScenarioError(f"{where}.to: the wall has zero length")
-    return spec
-
-
 @dataclass(frozen=True)
 class ObjectSpec:
     """A small movable object resting on a fixture's top at offset `at` (fixture axes)."""
 
-    id: str
-    label: str
-    size: Vec3
-    on: str
+    __pydantic_config__ = CHECKED
+    id: Text
+    label: Text
+    size: Size3
+    on: Text
     at: Vec2 = (0.0, 0.0)
-    yaw: float = 0.0
-    absent: bool = False  # not in the scene until an appear event
-
-
-def _offset(value: Any, where: str) -> Vec2:
-    """An [dx, dy] offset on a support's top."""
-    return vector(value, where, 2)  # type: ignore[no-any-return]
-
-
-def parse_object(value: Any, where: str) -> ObjectSpec:
-    """One entry of `objects`."""
-    section = Section(value, where)
-    spec = ObjectSpec(
-        id=section.get("id", text),
-        label=section.get("label", text),
-        size=section.get("size", lambda item, at: vector(item, at, 3, positive_only=True)),
-        on=section.get("on", text),
-        at=section.get("at", _offset, (0.0, 0.0)),
-        yaw=section.get("yaw", number, 0.0),
-        absent=section.get("absent", boolean, False),
-    )
-    section.finish()
-    return spec
+    yaw: Number = 0.0
+    absent: Flag = False  # not in the scene until an appear event
 
 
 @dataclass(frozen=True)
@@ -205,37 +141,40 @@ _EVENT_FIELDS = {
 }
 
 
-def parse_event(value: Any, where: str) -> tuple[EventSpec, ObjectSpec | None]:
-    """One entry of `events`, plus the object it defines when an appear event gives label/size."""
-    section = Section(value, where)
-    kind = section.get("type", text)
-    if kind not in EVENT_TYPES:
-        raise ScenarioError(f"{where}.type: {kind!r} is not one of {', '.join(EVENT_TYPES)}")
-    for key in map(str, section.data):
-        if key in {"on", "at", "yaw", "label", "size"} and key not in _EVENT_FIELDS[kind]:
-            raise ScenarioError(f"{where}.{key}: not allowed for a {kind} event")
-    event = EventSpec(
-        frame=section.get("frame", count),
-        type=kind,
-        object=section.get("object", text),
-        on=section.get("on", text, None),
-        at=section.get("at", _offset, None),
-        yaw=section.get("yaw", number, None),
-    )
-    if kind == "move" and event.at is None:
-        raise ScenarioError(f"{where}.at: required for a move event")
-    if kind == "transfer" and event.on is None:
-        raise ScenarioError(f"{where}.on: required for a transfer event")
-    label = section.get("label", text, None)
-    size = section.get("size", lambda item, at: vector(item, at, 3, positive_only=True), None)
-    section.finish()
-    if (label is None) != (size is None):
-        raise ScenarioError(f"{where}.{'size' if size is None else 'label'}: give label and size")
-    defined = None
-    if label is not None:
-        if event.on is None:
-            raise ScenarioError(f"{where}.on: required when the event defines the object")
-        defined = ObjectSpec(
-            event.object, label, size, event.on, event.at or (0.0, 0.0), event.yaw or 0.0, True
-        )
-    return event, defined
+@dataclass(frozen=True)
+class EventEntry:
+    """One entry of `events`: the change, and the object it defines when it gives label and size."""
+
+    __pydantic_config__ = CHECKED
+    frame: Count
+    type: Literal["appear", "move", "disappear", "transfer"]
+    object: Text
+    on: Text | None = None
+    at: Vec2 | None = None
+    yaw: Number | None = None
+    label: Text | None = None
+    size: Size3 | None = None
+
+    def __post_init__(self) -> None:
+        for key in ("on", "at", "yaw", "label", "size"):
+            if getattr(self, key) is not None and key not in _EVENT_FIELDS[self.type]:
+                raise field_error(key, f"not allowed for a {self.type} event")
+        if self.type == "move" and self.at is None:
+            raise field_error("at", "required for a move event")
+        if self.type == "transfer" and self.on is None:
+            raise field_error("on", "required for a transfer event")
+        if (self.label is None) != (self.size is None):
+            raise field_error("size" if self.size is None else "label", "give label and size")
+        if self.label is not None and self.on is None:
+            raise field_error("on", "required when the event defines the object")
+
+    def spec(self) -> EventSpec:
+        """The change alone."""
+        return EventSpec(self.frame, self.type, self.object, self.on, self.at, self.yaw)
+
+    def defined(self) -> ObjectSpec | None:
+        """The object an appear event defines (absent until then), None when it names one."""
+        if self.label is None or self.size is None or self.on is None:
+            return None
+        at, yaw = self.at or (0.0, 0.0), self.yaw or 0.0
+        return ObjectSpec(self.object, self.label, self.size, self.on, at, yaw, True)

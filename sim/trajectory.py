@@ -43,8 +43,8 @@ def _along_polyline(
 def _orbit_eye(spec: TrajectorySpec, eye_height: float, angle: float) -> np.ndarray:
     """Eye position on the orbit ellipse, raised or lowered by its bob."""
     height = eye_height
-    if spec.bob_amplitude > 0:
-        height += spec.bob_amplitude * math.sin(spec.bob_cycles * angle)
+    if spec.bob.amplitude > 0:
+        height += spec.bob.amplitude * math.sin(spec.bob.cycles * angle)
     return np.array(
         [
             spec.center[0] + spec.radii[0] * math.cos(angle),

@@ -223,7 +223,7 @@ def test_an_elliptic_orbit_bobs_and_looks_at_its_targets_in_blocks() -> None:
     ("trajectory", "field"),
     [
         ({"radius": [2.2]}, r"trajectory\.radius: expected a list of 2"),
-        ({"radius": [2.2, 0]}, r"trajectory\.radius: every entry must be > 0"),
+        ({"radius": [2.2, 0]}, r"trajectory\.radius\[1\]: must be > 0\.0, got 0"),
         ({"look_at": [[3.0, 2.3, 0.75], [3.0, 4.6]]}, r"trajectory\.look_at\[1\]"),
         ({"look_blocks": 0}, r"trajectory\.look_blocks"),
         ({"bob": {"cycles": None}}, r"trajectory\.bob\.cycles: required"),
