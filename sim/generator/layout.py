@@ -264,7 +264,7 @@ class Furnisher:
         for _ in range(tries):
             turned = self.rng.random() < 0.5
             sx, sy = (size[1], size[0]) if turned else (size[0], size[1])
-            margin = 0.75 + (0.5 if chairs else 0.0)
+            margin = 0.6 + (0.5 if chairs else 0.0)
             if x1 - x0 < sx + 2 * margin or y1 - y0 < sy + 2 * margin:
                 return None
             cx = round(self.rng.uniform(x0 + margin + sx / 2, x1 - margin - sx / 2), 2)
@@ -285,7 +285,7 @@ class Furnisher:
                       (round(x, 2), round(y, 2)), (0.45, 0.45, 0.95), room, False)
                 for k, (x, y) in enumerate(seats)
             ]
-            ok = self._clear(table.rect(0.6), room, WALKWAY_M)
+            ok = self._clear(table.rect(0.55), room, 0.3)
             ok = ok and all(self._clear(chair.rect(), room, 0.5) for chair in chair_pieces)
             if ok:
                 self.counts["chair"] = self.counts.get("chair", 0) + len(chair_pieces)
@@ -325,11 +325,11 @@ def furnish_room(furnisher: Furnisher, room: int, kind: str, budget: int) -> int
         return sum(piece is not None for piece in placed) < budget
 
     if kind == "kitchen":
-        length = rng.choice((1.8, 2.0, 2.4))
-        placed.append(furnisher.against_wall("counter", room, length, 0.6, 0.9))
+        size = (rng.choice((1.2, 1.4, 1.6)), rng.choice((0.8, 0.9)), 0.75)
+        placed.append(furnisher.free_standing("table", room, size, rng.choice((2, 4))))
         if room_left():
-            size = (rng.choice((1.2, 1.4, 1.6)), rng.choice((0.8, 0.9)), 0.75)
-            placed.append(furnisher.free_standing("table", room, size, rng.choice((2, 4))))
+            length = rng.choice((1.8, 2.0, 2.4))
+            placed.append(furnisher.against_wall("counter", room, length, 0.6, 0.9))
     elif kind == "living":
         sofa = furnisher.against_wall("sofa", room, rng.choice((1.8, 2.0)), 0.9, 0.45)
         placed.append(sofa)
