@@ -36,7 +36,11 @@ def to_yaml(mapping: dict[str, Any], header: str = "") -> str:
                 lines.append("    keyframes:")
                 lines += [f"      - {_flow(key_frame)}" for key_frame in person["keyframes"]]
         elif key == "detector":
-            lines += ["detector:", "  labels:", f"    confusable: {_flow(value['labels']['confusable'])}"]
+            lines += [
+                "detector:",
+                "  labels:",
+                f"    confusable: {_flow(value['labels']['confusable'])}",
+            ]
         elif isinstance(value, list):
             lines.append(f"{key}:")
             lines += [f"  - {_flow(entry)}" for entry in value]
@@ -65,10 +69,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {error}", file=sys.stderr)
         return 1
     kind = "active" if arguments.active else "dynamic"
-    header = [f"Generated {kind} world (python -m sim.generator --seed {arguments.seed}"
-              f"{' --active' if arguments.active else ''}); regenerate rather than edit."]
+    header = [
+        f"Generated {kind} world (python -m sim.generator --seed {arguments.seed}"
+        f"{' --active' if arguments.active else ''}); regenerate rather than edit."
+    ]
     for hard in notes.hard_events:
-        header.append(f"{hard.kind}: {', '.join(hard.objects)} at {list(hard.frames)} ({hard.detail})")
+        header.append(
+            f"{hard.kind}: {', '.join(hard.objects)} at {list(hard.frames)} ({hard.detail})"
+        )
     text = to_yaml(mapping, "\n".join(header))
     if arguments.out is None:
         sys.stdout.write(text)

@@ -78,12 +78,18 @@ class Scripter:
                 if new is None or old is None:
                     continue
                 if (new + 3 <= old) if new_first else (old + 3 <= new):
-                    entry: EventEntry = {"frame": frame, "type": "transfer", "object": cand.object,
-                                         "on": cand.to, "at": list(cand.to_at)}
+                    entry: EventEntry = {
+                        "frame": frame,
+                        "type": "transfer",
+                        "object": cand.object,
+                        "on": cand.to,
+                        "at": list(cand.to_at),
+                    }
                     order = "new place first" if new_first else "old place first"
                     self._add(
                         "transfer_new_place_first" if new_first else "transfer_old_place_first",
-                        [entry], f"{order}: new place seen at {new}, old place at {old}",
+                        [entry],
+                        f"{order}: new place seen at {new}, old place at {old}",
                     )
                     return
         raise Unscriptable("transfer " + ("new place first" if new_first else "old place first"))
@@ -97,8 +103,11 @@ class Scripter:
                 for frame in self._frames():
                     hidden = bool(shown[frame]) and pixels[frame] < HIDDEN_PIXELS
                     if (hidden if hidden_only else not seen[frame]) and _after(seen, frame):
-                        entry: EventEntry = {"frame": frame, "type": "disappear",
-                                             "object": cand.object}
+                        entry: EventEntry = {
+                            "frame": frame,
+                            "type": "disappear",
+                            "object": cand.object,
+                        }
                         detail = "in view, hidden" if hidden else "out of view"
                         self._add("disappear_while_hidden", [entry], detail)
                         return
@@ -112,21 +121,32 @@ class Scripter:
             for frame in self._frames():
                 if seen_old[frame] or seen_new[frame] or _after(seen_new, frame) is None:
                     continue
-                entry: EventEntry = {"frame": frame, "type": "move", "object": cand.object,
-                                     "at": list(cand.to_at)}
+                entry: EventEntry = {
+                    "frame": frame,
+                    "type": "move",
+                    "object": cand.object,
+                    "at": list(cand.to_at),
+                }
                 self._add("move_within_support", [entry], f"on {cand.on}")
                 return
         raise Unscriptable("move within a support")
 
-    def appear_behind(self, cand: Candidate, label: str, size: tuple[float, float, float],
-                      cover: str) -> None:
+    def appear_behind(
+        self, cand: Candidate, label: str, size: tuple[float, float, float], cover: str
+    ) -> None:
         """A new object put down behind a taller one while the robot is elsewhere."""
         seen = self.sights.seen(cand.object)
         for frame in self._frames():
             if not seen[frame] and _after(seen, frame) is not None:
-                entry: EventEntry = {"frame": frame, "type": "appear", "object": cand.object,
-                                     "label": label, "size": list(size), "on": cand.on,
-                                     "at": list(cand.at)}
+                entry: EventEntry = {
+                    "frame": frame,
+                    "type": "appear",
+                    "object": cand.object,
+                    "label": label,
+                    "size": list(size),
+                    "on": cand.on,
+                    "at": list(cand.at),
+                }
                 self._add("appear_behind_occluder", [entry], f"behind {cover}")
                 return
         raise Unscriptable("appearance behind an occluder")
@@ -143,10 +163,20 @@ class Scripter:
                 if _after(seen_a, frame) is None or _after(seen_b, frame) is None:
                     continue
                 entries: list[EventEntry] = [
-                    {"frame": frame, "type": "transfer", "object": first.object,
-                     "on": second.on, "at": list(second.at)},
-                    {"frame": frame, "type": "transfer", "object": second.object,
-                     "on": first.on, "at": list(first.at)},
+                    {
+                        "frame": frame,
+                        "type": "transfer",
+                        "object": first.object,
+                        "on": second.on,
+                        "at": list(second.at),
+                    },
+                    {
+                        "frame": frame,
+                        "type": "transfer",
+                        "object": second.object,
+                        "on": first.on,
+                        "at": list(first.at),
+                    },
                 ]
                 self._add("swap_same_class", entries, f"{first.on} <-> {second.on}")
                 return
@@ -167,8 +197,13 @@ class Scripter:
                         continue
                     entries: list[EventEntry] = [
                         {"frame": leave, "type": "disappear", "object": cand.object},
-                        {"frame": back, "type": "appear", "object": cand.object, "on": cand.on,
-                         "at": list(cand.at)},
+                        {
+                            "frame": back,
+                            "type": "appear",
+                            "object": cand.object,
+                            "on": cand.on,
+                            "at": list(cand.at),
+                        },
                     ]
                     self._add("leave_and_return", entries, f"away {back - leave} frames")
                     return

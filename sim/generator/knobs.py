@@ -48,7 +48,12 @@ class WorldKnobs:
 def active_knobs() -> WorldKnobs:
     """The defaults of active worlds: several rooms, 8-14 fixtures, 10-16 objects, a short walk."""
     return WorldKnobs(
-        area_m2=80.0, rooms=4, clutter=(1, 2), people=0, frames=20, fixtures=(8, 14),
+        area_m2=80.0,
+        rooms=4,
+        clutter=(1, 2),
+        people=0,
+        frames=20,
+        fixtures=(8, 14),
         objects=(10, 16),
     )
 

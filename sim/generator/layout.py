@@ -114,9 +114,7 @@ class Wall:
         """The centre of each door gap."""
         (x0, y0), (x1, y1) = self.start, self.end
         length = math.hypot(x1 - x0, y1 - y0)
-        return [
-            (x0 + (x1 - x0) * c / length, y0 + (y1 - y0) * c / length) for c, _ in self.doors
-        ]
+        return [(x0 + (x1 - x0) * c / length, y0 + (y1 - y0) * c / length) for c, _ in self.doors]
 
 
 @dataclass
@@ -155,12 +153,16 @@ def _overlap(a: Rect, b: Rect) -> bool:
 
 def _inside(inner: Rect, outer: Rect) -> bool:
     return (
-        inner[0] >= outer[0] and inner[1] >= outer[1] and inner[2] <= outer[2]
+        inner[0] >= outer[0]
+        and inner[1] >= outer[1]
+        and inner[2] <= outer[2]
         and inner[3] <= outer[3]
     )
 
 
-def split_rooms(rng: random.Random, knobs: WorldKnobs) -> tuple[tuple[float, float], list[Rect], list[Wall]]:
+def split_rooms(
+    rng: random.Random, knobs: WorldKnobs
+) -> tuple[tuple[float, float], list[Rect], list[Wall]]:
     """The house rectangle cut into `knobs.rooms` rooms; each cut is a wall with door gaps."""
     aspect = rng.uniform(1.2, 1.6)
     sx = round(math.sqrt(knobs.area_m2 * aspect), 1)
@@ -219,7 +221,9 @@ class Furnisher:
 
     def _clear(self, rect: Rect, room: int, gap: float, ignore: tuple[str, ...] = ()) -> bool:
         x0, y0, x1, y1 = self.house.rooms[room]
-        if not _inside(rect, (x0 + EDGE_M - 1e-9, y0 + EDGE_M - 1e-9, x1 - EDGE_M + 1e-9, y1 - EDGE_M + 1e-9)):
+        if not _inside(
+            rect, (x0 + EDGE_M - 1e-9, y0 + EDGE_M - 1e-9, x1 - EDGE_M + 1e-9, y1 - EDGE_M + 1e-9)
+        ):
             return False
         if any(_overlap(rect, zone) for zone in self.zones):
             return False
@@ -249,7 +253,9 @@ class Furnisher:
                 cx = x0 + EDGE_M + depth / 2 if side == "W" else x1 - EDGE_M - depth / 2
                 size = (depth, length, height)
                 front = (1.0, 0.0) if side == "W" else (-1.0, 0.0)
-            piece = Piece(self._id(label), label, (round(cx, 2), round(cy, 2)), size, room, True, front)
+            piece = Piece(
+                self._id(label), label, (round(cx, 2), round(cy, 2)), size, room, True, front
+            )
             if self._clear(piece.rect(), room, WALKWAY_M):
                 self.house.pieces.append(piece)
                 return piece
@@ -281,8 +287,14 @@ class Furnisher:
                     at = (cx + sign * (sx / 2 + offset), cy + along * sy)
                 seats.append(at)
             chair_pieces = [
-                Piece(f"chair_{self.counts.get('chair', 0) + k + 1}", "chair",
-                      (round(x, 2), round(y, 2)), (0.45, 0.45, 0.95), room, False)
+                Piece(
+                    f"chair_{self.counts.get('chair', 0) + k + 1}",
+                    "chair",
+                    (round(x, 2), round(y, 2)),
+                    (0.45, 0.45, 0.95),
+                    room,
+                    False,
+                )
                 for k, (x, y) in enumerate(seats)
             ]
             ok = self._clear(table.rect(0.55), room, 0.3)
@@ -305,8 +317,15 @@ class Furnisher:
             else:
                 cy = anchor.center[1] + sign * (anchor.size[1] / 2 + 0.08 + size[1] / 2)
                 cx = anchor.center[0] - fx * (anchor.size[0] / 2 - size[0] / 2)
-            piece = Piece(self._id(label), label, (round(cx, 2), round(cy, 2)), size, anchor.room,
-                          True, anchor.front)
+            piece = Piece(
+                self._id(label),
+                label,
+                (round(cx, 2), round(cy, 2)),
+                size,
+                anchor.room,
+                True,
+                anchor.front,
+            )
             if self._clear(piece.rect(), anchor.room, 0.05, ignore=(anchor.id,)) and not _overlap(
                 piece.rect(0.02), anchor.rect()
             ):
@@ -340,16 +359,26 @@ def furnish_room(furnisher: Furnisher, room: int, kind: str, budget: int) -> int
             cx = sofa.center[0] + fx * (sofa.size[0] / 2 + 0.45 + 0.3)
             cy = sofa.center[1] + fy * (sofa.size[1] / 2 + 0.45 + 0.3)
             size = (length, 0.6, 0.45) if fx == 0.0 else (0.6, length, 0.45)
-            table = Piece(furnisher._id("table"), "table", (round(cx, 2), round(cy, 2)), size,
-                          room, True, None)
+            table = Piece(
+                furnisher._id("table"),
+                "table",
+                (round(cx, 2), round(cy, 2)),
+                size,
+                room,
+                True,
+                None,
+            )
             if furnisher._clear(table.rect(), room, 0.4, ignore=(sofa.id,)):
                 furnisher.house.pieces.append(table)
                 placed.append(table)
             else:
                 furnisher.counts["table"] -= 1
         if room_left():
-            placed.append(furnisher.against_wall("shelf", room, rng.choice((1.0, 1.2)), 0.45,
-                                                 rng.choice((1.0, 1.1))))
+            placed.append(
+                furnisher.against_wall(
+                    "shelf", room, rng.choice((1.0, 1.2)), 0.45, rng.choice((1.0, 1.1))
+                )
+            )
     elif kind == "bedroom":
         bed = furnisher.against_wall("bed", room, 1.6, 2.0, 0.55)
         placed.append(bed)
@@ -362,10 +391,17 @@ def furnish_room(furnisher: Furnisher, room: int, kind: str, budget: int) -> int
         placed.append(desk)
         if desk is not None and desk.front is not None:
             fx, fy = desk.front
-            chair = Piece(f"chair_{furnisher.counts.get('chair', 0) + 1}", "chair",
-                          (round(desk.center[0] + fx * (desk.size[0] / 2 + 0.3), 2),
-                           round(desk.center[1] + fy * (desk.size[1] / 2 + 0.3), 2)),
-                          (0.45, 0.45, 0.95), room, False)
+            chair = Piece(
+                f"chair_{furnisher.counts.get('chair', 0) + 1}",
+                "chair",
+                (
+                    round(desk.center[0] + fx * (desk.size[0] / 2 + 0.3), 2),
+                    round(desk.center[1] + fy * (desk.size[1] / 2 + 0.3), 2),
+                ),
+                (0.45, 0.45, 0.95),
+                room,
+                False,
+            )
             if furnisher._clear(chair.rect(), room, 0.0, ignore=(desk.id,)):
                 furnisher.counts["chair"] = furnisher.counts.get("chair", 0) + 1
                 furnisher.house.pieces.append(chair)
@@ -396,8 +432,12 @@ def build_house(rng: random.Random, knobs: WorldKnobs) -> House | None:
                 furnish_room(furnisher, room, kind, min(left, 3))
             else:  # extra shelves and cabinets against free walls
                 label = rng.choice(("shelf", "cabinet", "counter" if kind == "kitchen" else "desk"))
-                dims = {"shelf": (1.0, 0.45, 1.0), "cabinet": (0.8, 0.45, 0.8),
-                        "counter": (1.6, 0.6, 0.9), "desk": (1.2, 0.7, 0.75)}[label]
+                dims = {
+                    "shelf": (1.0, 0.45, 1.0),
+                    "cabinet": (0.8, 0.45, 0.8),
+                    "counter": (1.6, 0.6, 0.9),
+                    "desk": (1.2, 0.7, 0.75),
+                }[label]
                 furnisher.against_wall(label, room, *dims)
     if not knobs.fixtures[0] <= len(house.fixtures()) <= knobs.fixtures[1]:
         return None
@@ -405,8 +445,11 @@ def build_house(rng: random.Random, knobs: WorldKnobs) -> House | None:
 
 
 def _spot(
-    rng: random.Random, top: tuple[float, float], size: tuple[float, float, float],
-    taken: list[Rect], tries: int = 30,
+    rng: random.Random,
+    top: tuple[float, float],
+    size: tuple[float, float, float],
+    taken: list[Rect],
+    tries: int = 30,
 ) -> tuple[float, float] | None:
     """A free offset on a top of `top` (x, y extents) for an object of `size`."""
     hx, hy = size[0] / 2, size[1] / 2
@@ -434,7 +477,9 @@ class Shelver:
         self.counts[label] = self.counts.get(label, 0) + 1
         return f"{label}_{self.counts[label]}"
 
-    def reserve(self, fixture: str, at: tuple[float, float], size: tuple[float, float, float]) -> None:
+    def reserve(
+        self, fixture: str, at: tuple[float, float], size: tuple[float, float, float]
+    ) -> None:
         """Mark a spot as used from now on."""
         hx, hy = size[0] / 2, size[1] / 2
         self.taken[fixture].append((at[0] - hx, at[1] - hy, at[0] + hx, at[1] + hy))
@@ -473,9 +518,17 @@ class Shelver:
             gap = 0.5 * (max(small_size[:2]) + max(tall_size[:2])) + 0.02
             front = (round(at[0] + ux * gap, 3), round(at[1] + uy * gap, 3))
             hx, hy = tall_size[0] / 2, tall_size[1] / 2
-            if abs(front[0]) + hx > piece.size[0] / 2 - 0.02 or abs(front[1]) + hy > piece.size[1] / 2 - 0.02:
+            if (
+                abs(front[0]) + hx > piece.size[0] / 2 - 0.02
+                or abs(front[1]) + hy > piece.size[1] / 2 - 0.02
+            ):
                 continue
-            rect = (front[0] - hx - 0.01, front[1] - hy - 0.01, front[0] + hx + 0.01, front[1] + hy + 0.01)
+            rect = (
+                front[0] - hx - 0.01,
+                front[1] - hy - 0.01,
+                front[0] + hx + 0.01,
+                front[1] + hy + 0.01,
+            )
             if any(_overlap(rect, other) for other in self.taken[fixture]):
                 continue
             self.reserve(fixture, at, small_size)

@@ -3,6 +3,7 @@ walkable waypoint polyline through the doors, and people who step into the robot
 
 from __future__ import annotations
 
+import itertools
 import math
 import random
 from dataclasses import dataclass
@@ -44,18 +45,26 @@ def static_world(house: House) -> World:
     """The house as boxes: fixtures, walls and chairs (for free space and line-of-sight tests)."""
     fixtures = tuple(
         Box(p.id, p.label, (p.center[0], p.center[1], p.size[2] / 2), p.size, kind="fixture")
-        for p in house.pieces if p.fixture
+        for p in house.pieces
+        if p.fixture
     )
     occluders = [
         Box(p.id, p.label, (p.center[0], p.center[1], p.size[2] / 2), p.size, kind="occluder")
-        for p in house.pieces if not p.fixture
+        for p in house.pieces
+        if not p.fixture
     ]
     for index, wall in enumerate(house.walls):
         for piece, ((x0, y0), (x1, y1)) in enumerate(wall.segments()):
             length = math.hypot(x1 - x0, y1 - y0)
             occluders.append(
-                Box(f"wall_{index}_{piece}", "wall", ((x0 + x1) / 2, (y0 + y1) / 2, WALL_HEIGHT / 2),
-                    (length, WALL_THICKNESS, WALL_HEIGHT), math.atan2(y1 - y0, x1 - x0), "occluder")
+                Box(
+                    f"wall_{index}_{piece}",
+                    "wall",
+                    ((x0 + x1) / 2, (y0 + y1) / 2, WALL_HEIGHT / 2),
+                    (length, WALL_THICKNESS, WALL_HEIGHT),
+                    math.atan2(y1 - y0, x1 - x0),
+                    "occluder",
+                )
             )
     return World((house.size[0], house.size[1], WALL_HEIGHT + 0.1), fixtures, (), tuple(occluders))
 
@@ -75,18 +84,26 @@ class Planner:
     def _blocked(self, a: tuple[float, float], b: tuple[float, float], skip: str) -> bool:
         """Whether the sight line a -> b crosses a wall or another fixture's footprint."""
         steps = max(int(math.hypot(b[0] - a[0], b[1] - a[1]) / 0.05), 1)
-        boxes = [box for box in (*self.world.fixtures, *self.world.occluders)
-                 if box.id != skip and box.label != "chair"]
+        boxes = [
+            box
+            for box in (*self.world.fixtures, *self.world.occluders)
+            if box.id != skip and box.label != "chair"
+        ]
         for k in range(steps):
             x, y = a[0] + (b[0] - a[0]) * k / steps, a[1] + (b[1] - a[1]) * k / steps
             for box in boxes:
                 c, s = math.cos(box.yaw), math.sin(box.yaw)
                 dx, dy = x - box.center[0], y - box.center[1]
-                if abs(c * dx + s * dy) <= box.size[0] / 2 and abs(-s * dx + c * dy) <= box.size[1] / 2:
+                if (
+                    abs(c * dx + s * dy) <= box.size[0] / 2
+                    and abs(-s * dx + c * dy) <= box.size[1] / 2
+                ):
                     return True
         return False
 
-    def viewpoints(self, piece: Piece, rng: random.Random, count: int = 3) -> list[tuple[float, float]]:
+    def viewpoints(
+        self, piece: Piece, rng: random.Random, count: int = 3
+    ) -> list[tuple[float, float]]:
         """Up to `count` good, mutually distinct places to look at a fixture from."""
         x0, y0, x1, y1 = piece.rect()
         px = np.clip(self.centres[:, 0], x0, x1)
@@ -103,8 +120,10 @@ class Planner:
         if piece.front is not None:
             facing = (dx * piece.front[0] + dy * piece.front[1]) / np.maximum(reach, 1e-9)
             ok &= facing >= math.cos(math.radians(55))
-        score = np.abs(gap - 1.3) + 0.6 * (1.0 - facing) + 0.3 * np.array(
-            [rng.random() for _ in range(len(gap))]
+        score = (
+            np.abs(gap - 1.3)
+            + 0.6 * (1.0 - facing)
+            + 0.3 * np.array([rng.random() for _ in range(len(gap))])
         )
         chosen: list[tuple[float, float]] = []
         for node in np.argsort(np.where(ok, score, np.inf)):
@@ -152,7 +171,7 @@ class Planner:
     def distance(self, a: tuple[float, float], b: tuple[float, float]) -> float:
         """Length of the walkable path a -> b."""
         points = [a, *self.path(a, b), b]
-        return sum(math.dist(p, q) for p, q in zip(points, points[1:], strict=False))
+        return sum(math.dist(p, q) for p, q in itertools.pairwise(points))
 
 
 def visit_order(
@@ -217,7 +236,9 @@ def build_route(
 
 def visit_frames(route: Route, frames: int, eye_height: float) -> list[tuple[int, int]]:
     """Per visit: the first and last frame of its pause (the trajectory's own timing, one lap)."""
-    eyes = np.array([(x, y, eye_height) for x, y in route.points] + [(*route.points[0], eye_height)])
+    eyes = np.array(
+        [(x, y, eye_height) for x, y in route.points] + [(*route.points[0], eye_height)]
+    )
     lengths = np.linalg.norm(np.diff(eyes, axis=0), axis=1)
     stops = np.asarray(route.pause, dtype=np.float64)
     moving = (1.0 - stops.sum()) * lengths / max(float(lengths.sum()), 1e-12)
@@ -233,12 +254,16 @@ def visit_frames(route: Route, frames: int, eye_height: float) -> list[tuple[int
 
 
 def walker(
-    planner: Planner, start: tuple[float, float], stand: tuple[float, float],
-    arrive: int, leave: int, frames: int,
+    planner: Planner,
+    start: tuple[float, float],
+    stand: tuple[float, float],
+    arrive: int,
+    leave: int,
+    frames: int,
 ) -> list[tuple[int, tuple[float, float]]] | None:
     """Keyframes of a person walking start -> stand, staying [arrive, leave], walking back."""
     there = [start, *planner.path(start, stand), stand]
-    lengths = [math.dist(p, q) for p, q in zip(there, there[1:], strict=False)]
+    lengths = [math.dist(p, q) for p, q in itertools.pairwise(there)]
     walk = sum(lengths)
     first = arrive - math.ceil(walk * FRAMES_PER_METRE)
     last = leave + math.ceil(walk * FRAMES_PER_METRE)
@@ -263,9 +288,7 @@ def walker(
     return keys
 
 
-def standing_spot(
-    planner: Planner, visit: Visit, piece: Piece
-) -> tuple[float, float] | None:
+def standing_spot(planner: Planner, visit: Visit, piece: Piece) -> tuple[float, float] | None:
     """A free spot between a viewpoint and its fixture where a person blocks part of the view."""
     for share in (0.5, 0.4, 0.6, 0.3, 0.7):
         x = visit.at[0] + share * (piece.center[0] - visit.at[0])

@@ -39,9 +39,7 @@ class Sightings:
         return seen
 
 
-def in_view(
-    camera: CameraModel, pose: np.ndarray, point: Sequence[float]
-) -> bool:
+def in_view(camera: CameraModel, pose: np.ndarray, point: Sequence[float]) -> bool:
     """Whether a world point projects into the image within the depth range."""
     world_to_camera = np.linalg.inv(pose)
     x, y, z = world_to_camera[:3, :3] @ np.asarray(point, dtype=np.float64) + world_to_camera[:3, 3]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+import itertools
 import math
 import random
 from typing import Any
@@ -10,21 +12,38 @@ from sim.generator.events import Candidate, EventEntry, Scripter, Unscriptable
 from sim.generator.knobs import WorldKnobs, WorldNotes, active_knobs
 from sim.generator.layout import (
     ON,
-    SIZES,
     TALL_ON,
     WALL_HEIGHT,
     House,
     Item,
+    Piece,
     Shelver,
     build_house,
 )
-from sim.generator.route import Planner, Route, build_route, standing_spot, visit_frames, visit_order, walker
+from sim.generator.route import (
+    Planner,
+    Route,
+    build_route,
+    standing_spot,
+    visit_frames,
+    visit_order,
+    walker,
+)
 from sim.generator.visibility import hidden_fraction, sightings
 from sim.scenario import ScenarioError, scenario_from_dict
 
 MAX_ATTEMPTS = 30
-CAMERA = {"width": 640, "height": 480, "fx": 525, "fy": 525, "cx": 319.5, "cy": 239.5,
-          "eye_height": 1.3, "min_depth": 0.3, "max_depth": 6.0}
+CAMERA = {
+    "width": 640,
+    "height": 480,
+    "fx": 525,
+    "fy": 525,
+    "cx": 319.5,
+    "cy": 239.5,
+    "eye_height": 1.3,
+    "min_depth": 0.3,
+    "max_depth": 6.0,
+}
 DETECTOR = {"labels": {"confusable": [["cup", "mug"], ["desk", "table"]]}}
 SMALL_BEHIND = ("mug", "cup")  # narrower than every cover
 FRAMES_PER_VISIT = 11  # a dynamic world's route stops about once per this many frames
@@ -43,8 +62,14 @@ def _r(value: float) -> float:
     return round(float(value), 3)
 
 
-def _items(rng: random.Random, house: House, shelver: Shelver, knobs: WorldKnobs,
-           planner_views: dict[str, list[tuple[float, float]]], active: bool) -> None:
+def _items(
+    rng: random.Random,
+    house: House,
+    shelver: Shelver,
+    knobs: WorldKnobs,
+    planner_views: dict[str, list[tuple[float, float]]],
+    active: bool,
+) -> None:
     """Objects on every fixture: a class on two fixtures, small things behind taller ones."""
     fixtures = house.fixtures()
     pair_label = rng.choice(("mug", "book", "cup"))
@@ -56,9 +81,12 @@ def _items(rng: random.Random, house: House, shelver: Shelver, knobs: WorldKnobs
         coverable = [p for p in fixtures if TALL_ON[p.label] and p.id in planner_views]
         rng.shuffle(coverable)
         for piece in coverable[:3]:
-            small = rng.choice([label for label in SMALL_BEHIND if label in ON[piece.label]] or ["mug"])
-            shelver.place_behind(piece.id, small, rng.choice(TALL_ON[piece.label]),
-                                 planner_views[piece.id][0])
+            small = rng.choice(
+                [label for label in SMALL_BEHIND if label in ON[piece.label]] or ["mug"]
+            )
+            shelver.place_behind(
+                piece.id, small, rng.choice(TALL_ON[piece.label]), planner_views[piece.id][0]
+            )
     if knobs.objects is not None:
         wanted = rng.randint(*knobs.objects)
         order = list(fixtures)
@@ -76,6 +104,12 @@ def _items(rng: random.Random, house: House, shelver: Shelver, knobs: WorldKnobs
             shelver.place(piece.id, rng.choice(ON[piece.label]))
 
 
+def _step_cost(house: House, here: Piece, piece_id: str) -> float:
+    """Distance to the next fixture, a room change counting 3 m extra."""
+    there = house.piece(piece_id)
+    return math.dist(here.center, there.center) + (3.0 if there.room != here.room else 0.0)
+
+
 def _tour(rng: random.Random, house: House) -> list[str]:
     """Fixtures in a walking order: nearest next, a room change counting 3 m extra."""
     left = [piece.id for piece in house.fixtures()]
@@ -83,10 +117,7 @@ def _tour(rng: random.Random, house: House) -> list[str]:
     tour = [left.pop()]
     while left:
         here = house.piece(tour[-1])
-        def cost(piece_id: str) -> float:
-            there = house.piece(piece_id)
-            return math.dist(here.center, there.center) + (3.0 if there.room != here.room else 0.0)
-        left.sort(key=cost)
+        left.sort(key=functools.partial(_step_cost, house, here))
         tour.append(left.pop(0))
     return tour
 
@@ -101,33 +132,61 @@ def _route_entry(route: Route) -> dict[str, Any]:
     return {"type": "waypoints", "loops": 1, "points": points}
 
 
-def _mapping(name: str, seed: int, house: House, frames: int, frame_period: float,
-             items: list[Item], route: Route, people: list[dict[str, Any]],
-             events: list[EventEntry]) -> dict[str, Any]:
+def _mapping(
+    name: str,
+    seed: int,
+    house: House,
+    frames: int,
+    frame_period: float,
+    items: list[Item],
+    route: Route,
+    people: list[dict[str, Any]],
+    events: list[EventEntry],
+) -> dict[str, Any]:
     walls = [
         {"from": [_r(a[0]), _r(a[1])], "to": [_r(b[0]), _r(b[1])], "height": WALL_HEIGHT}
-        for wall in house.walls for a, b in wall.segments()
+        for wall in house.walls
+        for a, b in wall.segments()
     ]
     fixtures = [
-        {"id": p.id, "label": p.label, "center": [_r(p.center[0]), _r(p.center[1])],
-         "size": [_r(v) for v in p.size]}
-        for p in house.pieces if p.fixture
+        {
+            "id": p.id,
+            "label": p.label,
+            "center": [_r(p.center[0]), _r(p.center[1])],
+            "size": [_r(v) for v in p.size],
+        }
+        for p in house.pieces
+        if p.fixture
     ]
     occluders = [
-        {"id": p.id, "label": p.label, "center": [_r(p.center[0]), _r(p.center[1])],
-         "size": [_r(v) for v in p.size]}
-        for p in house.pieces if not p.fixture
+        {
+            "id": p.id,
+            "label": p.label,
+            "center": [_r(p.center[0]), _r(p.center[1])],
+            "size": [_r(v) for v in p.size],
+        }
+        for p in house.pieces
+        if not p.fixture
     ]
     objects = [
-        {"id": i.id, "label": i.label, "size": [_r(v) for v in i.size], "on": i.on,
-         "at": [_r(i.at[0]), _r(i.at[1])]}
+        {
+            "id": i.id,
+            "label": i.label,
+            "size": [_r(v) for v in i.size],
+            "on": i.on,
+            "at": [_r(i.at[0]), _r(i.at[1])],
+        }
         for i in items
     ]
     mapping: dict[str, Any] = {
-        "name": name, "seed": seed, "frames": frames, "frame_period": frame_period,
+        "name": name,
+        "seed": seed,
+        "frames": frames,
+        "frame_period": frame_period,
         "camera": dict(CAMERA),
         "room": {"size": [_r(house.size[0]), _r(house.size[1]), WALL_HEIGHT]},
-        "walls": walls, "fixtures": fixtures,
+        "walls": walls,
+        "fixtures": fixtures,
     }
     if occluders:
         mapping["occluders"] = occluders
@@ -137,12 +196,21 @@ def _mapping(name: str, seed: int, house: House, frames: int, frame_period: floa
         mapping["people"] = people
     if events:
         mapping["events"] = sorted(events, key=lambda e: int(str(e["frame"])))
-    mapping["detector"] = {"labels": {"confusable": [list(g) for g in DETECTOR["labels"]["confusable"]]}}
+    mapping["detector"] = {
+        "labels": {"confusable": [list(g) for g in DETECTOR["labels"]["confusable"]]}
+    }
     return mapping
 
 
-def _people(rng: random.Random, planner: Planner, house: House, route: Route,
-            spans: list[tuple[int, int]], count: int, frames: int) -> list[dict[str, Any]]:
+def _people(
+    rng: random.Random,
+    planner: Planner,
+    house: House,
+    route: Route,
+    spans: list[tuple[int, int]],
+    count: int,
+    frames: int,
+) -> list[dict[str, Any]]:
     """People who walk in and stand between the robot and the fixture of one of its visits."""
     people: list[dict[str, Any]] = []
     choices = list(range(1, len(route.visits)))
@@ -177,7 +245,9 @@ def _people(rng: random.Random, planner: Planner, house: House, route: Route,
     return people
 
 
-def _attempt(seed: int, attempt: int, knobs: WorldKnobs, active: bool) -> tuple[dict[str, Any], WorldNotes]:
+def _attempt(
+    seed: int, attempt: int, knobs: WorldKnobs, active: bool
+) -> tuple[dict[str, Any], WorldNotes]:
     rng = random.Random(f"pbdag-world:{seed}:{attempt}:{'active' if active else 'dynamic'}")
     name = f"gen-active-{seed}" if active else f"gen-{seed}"
     house = build_house(rng, knobs)
@@ -201,8 +271,10 @@ def _attempt(seed: int, attempt: int, knobs: WorldKnobs, active: bool) -> tuple[
     fixtures = house.fixtures()
     visits = max(2, min(round(knobs.frames / FRAMES_PER_VISIT), 3 * len(fixtures)))
     per_visit = knobs.frames / visits
-    gaps = (max(2, round(knobs.revisit_frames[0] / per_visit)),
-            max(2, round(knobs.revisit_frames[1] / per_visit)))
+    gaps = (
+        max(2, round(knobs.revisit_frames[0] / per_visit)),
+        max(2, round(knobs.revisit_frames[1] / per_visit)),
+    )
     order = visit_order(rng, _tour(rng, house), visits, gaps)
     route = build_route(rng, planner, views, order, PAUSE_SHARE)
     spans = visit_frames(route, knobs.frames, float(CAMERA["eye_height"]))
@@ -210,11 +282,17 @@ def _attempt(seed: int, attempt: int, knobs: WorldKnobs, active: bool) -> tuple[
 
     # The object that will appear, behind a taller one already there.
     appear: tuple[Item, Item] | None = None
-    coverable = [p for p in fixtures if TALL_ON[p.label] and not any(i.on == p.id for i in house.items if i.id in house.behind)]
+    coverable = [
+        p
+        for p in fixtures
+        if TALL_ON[p.label] and not any(i.on == p.id for i in house.items if i.id in house.behind)
+    ]
     rng.shuffle(coverable)
     for piece in coverable:
         small = rng.choice([label for label in SMALL_BEHIND if label in ON[piece.label]] or ["cup"])
-        appear = shelver.place_behind(piece.id, small, rng.choice(TALL_ON[piece.label]), views[piece.id][0])
+        appear = shelver.place_behind(
+            piece.id, small, rng.choice(TALL_ON[piece.label]), views[piece.id][0]
+        )
         if appear is not None:
             break
     if appear is None:
@@ -244,14 +322,20 @@ def _attempt(seed: int, attempt: int, knobs: WorldKnobs, active: bool) -> tuple[
             ghost = Item(f"ghost_{len(ghosts)}", item.label, item.size, item.on, spot)
             ghosts.append(ghost)
             moves.append(Candidate(item.id, item.on, item.at, ghost.id, item.on, spot))
-    planning = _mapping(name, seed, house, knobs.frames, 0.25, [*house.items, *ghosts], route, people, [])
+    planning = _mapping(
+        name, seed, house, knobs.frames, 0.25, [*house.items, *ghosts], route, people, []
+    )
     scenario = scenario_from_dict(planning)
     sights = sightings(scenario, house.rooms)
 
     scripter = Scripter(rng, sights, knobs.frames)
     as_candidate = {i.id: Candidate(i.id, i.on, i.at) for i in listed}
-    scripter.appear_behind(Candidate(appearing.id, appearing.on, appearing.at), appearing.label,
-                           appearing.size, cover.id)
+    scripter.appear_behind(
+        Candidate(appearing.id, appearing.on, appearing.at),
+        appearing.label,
+        appearing.size,
+        cover.id,
+    )
     hidden_first = [as_candidate[i] for i in house.behind if i in as_candidate]
     scripter.disappear_hidden(hidden_first + [as_candidate[i.id] for i in plain])
     by_label: dict[str, list[Item]] = {}
@@ -259,7 +343,9 @@ def _attempt(seed: int, attempt: int, knobs: WorldKnobs, active: bool) -> tuple[
         by_label.setdefault(item.label, []).append(item)
     pairs = [
         (as_candidate[a.id], as_candidate[b.id])
-        for group in by_label.values() for k, a in enumerate(group) for b in group[k + 1 :]
+        for group in by_label.values()
+        for k, a in enumerate(group)
+        for b in group[k + 1 :]
         if a.on != b.on and a.size == b.size
     ]
     scripter.swap(pairs)
@@ -268,14 +354,17 @@ def _attempt(seed: int, attempt: int, knobs: WorldKnobs, active: bool) -> tuple[
     scripter.move(moves)
     scripter.leave_and_return([as_candidate[i.id] for i in plain])
 
-    mapping = _mapping(name, seed, house, knobs.frames, 0.25, listed, route, people, scripter.events)
+    mapping = _mapping(
+        name, seed, house, knobs.frames, 0.25, listed, route, people, scripter.events
+    )
     scenario_from_dict(mapping)
     visit_firsts: dict[str, list[int]] = {}
-    for visit, (first, _) in zip(route.visits, spans, strict=True):
-        visit_firsts.setdefault(visit.fixture, []).append(first)
+    for visit, (start, _) in zip(route.visits, spans, strict=True):
+        visit_firsts.setdefault(visit.fixture, []).append(start)
     intervals = tuple(
-        later - earlier for firsts in visit_firsts.values()
-        for earlier, later in zip(firsts, firsts[1:], strict=False)
+        later - earlier
+        for firsts in visit_firsts.values()
+        for earlier, later in itertools.pairwise(firsts)
     )
     behind = {small: big for small, big in house.behind.items()}
     planned = {}
@@ -284,8 +373,14 @@ def _attempt(seed: int, attempt: int, knobs: WorldKnobs, active: bool) -> tuple[
         if share is not None:
             planned[small] = round(share, 3)
     notes = WorldNotes(
-        seed, attempt, tuple(house.rooms), tuple(scripter.hard),
-        {key: tuple(value) for key, value in visit_firsts.items()}, intervals, behind, planned,
+        seed,
+        attempt,
+        tuple(house.rooms),
+        tuple(scripter.hard),
+        {key: tuple(value) for key, value in visit_firsts.items()},
+        intervals,
+        behind,
+        planned,
     )
     return mapping, notes
 
