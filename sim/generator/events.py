@@ -132,12 +132,14 @@ class Scripter:
         raise Unscriptable("move within a support")
 
     def appear_behind(
-        self, cand: Candidate, label: str, size: tuple[float, float, float], cover: str
-    ) -> None:
-        """A new object put down behind a taller one while the robot is elsewhere."""
-        seen = self.sights.seen(cand.object)
-        for frame in self._frames():
-            if not seen[frame] and _after(seen, frame) is not None:
+        self, candidates: list[tuple[Candidate, str, tuple[float, float, float], str]]
+    ) -> str:
+        """A new object put down behind a taller one while the robot is elsewhere (its id)."""
+        for cand, label, size, cover in candidates:
+            seen = self.sights.seen(cand.object)
+            for frame in self._frames():
+                if seen[frame] or _after(seen, frame) is None:
+                    continue
                 entry: EventEntry = {
                     "frame": frame,
                     "type": "appear",
@@ -148,7 +150,7 @@ class Scripter:
                     "at": list(cand.at),
                 }
                 self._add("appear_behind_occluder", [entry], f"behind {cover}")
-                return
+                return cand.object
         raise Unscriptable("appearance behind an occluder")
 
     def swap(self, pairs: list[tuple[Candidate, Candidate]]) -> None:

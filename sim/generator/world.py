@@ -281,7 +281,9 @@ def _attempt(
     people = _people(rng, planner, house, route, spans, knobs.people, knobs.frames)
 
     # The object that will appear, behind a taller one already there.
-    appear: tuple[Item, Item] | None = None
+    # Objects that may appear, each behind a taller one already there (one is scripted; the
+    # others stay ordinary objects behind their covers).
+    appear_pairs: list[tuple[Item, Item]] = []
     coverable = [
         p
         for p in fixtures
@@ -289,18 +291,18 @@ def _attempt(
     ]
     rng.shuffle(coverable)
     for piece in coverable:
+        if len(appear_pairs) >= 2:
+            break
         small = rng.choice([label for label in SMALL_BEHIND if label in ON[piece.label]] or ["cup"])
-        appear = shelver.place_behind(
+        pair = shelver.place_behind(
             piece.id, small, rng.choice(TALL_ON[piece.label]), views[piece.id][0]
         )
-        if appear is not None:
-            break
-    if appear is None:
+        if pair is not None:
+            appear_pairs.append(pair)
+    if not appear_pairs:
         raise _Resample("no fixture has room for an object behind a taller one")
-    appearing, cover = appear
     covers = set(house.behind.values())
-    listed = [i for i in house.items if i.id != appearing.id]
-    plain = [i for i in listed if i.id not in covers and i.id not in house.behind]
+    plain = [i for i in house.items if i.id not in covers and i.id not in house.behind]
     rng.shuffle(plain)
 
     # Destinations of moves and transfers, stood in for by planning objects ("ghosts").
@@ -316,12 +318,17 @@ def _attempt(
                 ghost = Item(f"ghost_{len(ghosts)}", item.label, item.size, target.id, spot)
                 ghosts.append(ghost)
                 transfers.append(Candidate(item.id, item.on, item.at, ghost.id, target.id, spot))
-    for item in plain[:6]:
-        spot = shelver.spot(item.on, item.size)
-        if spot is not None and math.dist(spot, item.at) >= 0.25:
-            ghost = Item(f"ghost_{len(ghosts)}", item.label, item.size, item.on, spot)
-            ghosts.append(ghost)
-            moves.append(Candidate(item.id, item.on, item.at, ghost.id, item.on, spot))
+    for item in plain:
+        if len(moves) >= 6:
+            break
+        # A spot 0.25 m or more away on the same top (a spot too close stays unused).
+        for _ in range(3):
+            spot = shelver.spot(item.on, item.size)
+            if spot is not None and math.dist(spot, item.at) >= 0.25:
+                ghost = Item(f"ghost_{len(ghosts)}", item.label, item.size, item.on, spot)
+                ghosts.append(ghost)
+                moves.append(Candidate(item.id, item.on, item.at, ghost.id, item.on, spot))
+                break
     planning = _mapping(
         name, seed, house, knobs.frames, 0.25, [*house.items, *ghosts], route, people, []
     )
@@ -329,13 +336,14 @@ def _attempt(
     sights = sightings(scenario, house.rooms)
 
     scripter = Scripter(rng, sights, knobs.frames)
-    as_candidate = {i.id: Candidate(i.id, i.on, i.at) for i in listed}
-    scripter.appear_behind(
-        Candidate(appearing.id, appearing.on, appearing.at),
-        appearing.label,
-        appearing.size,
-        cover.id,
+    as_candidate = {i.id: Candidate(i.id, i.on, i.at) for i in house.items}
+    appearing = scripter.appear_behind(
+        [
+            (as_candidate[small.id], small.label, small.size, cover.id)
+            for small, cover in appear_pairs
+        ]
     )
+    listed = [i for i in house.items if i.id != appearing]
     hidden_first = [as_candidate[i] for i in house.behind if i in as_candidate]
     scripter.disappear_hidden(hidden_first + [as_candidate[i.id] for i in plain])
     by_label: dict[str, list[Item]] = {}
