@@ -35,6 +35,14 @@ class Candidate:
     to_at: tuple[float, float] | None = None
 
 
+MIN_SIGHTINGS = 3  # an event object is seen this often before its change, and its result after
+
+
+def _often(seen: np.ndarray, start: int, stop: int | None = None) -> bool:
+    """Whether `seen` holds on at least MIN_SIGHTINGS frames of [start, stop)."""
+    return int(seen[max(start, 0) : stop].sum()) >= MIN_SIGHTINGS
+
+
 def _after(seen: np.ndarray, frame: int, stop: int | None = None) -> int | None:
     """The first frame after `frame` (and before `stop`) where `seen` holds."""
     hits = np.flatnonzero(seen[frame + 1 : stop])
@@ -72,7 +80,9 @@ class Scripter:
             assert cand.ghost is not None and cand.to is not None and cand.to_at is not None
             seen_old, seen_new = self.sights.seen(cand.object), self.sights.seen(cand.ghost)
             for frame in self._frames():
-                if seen_old[frame]:
+                if seen_old[frame] or seen_new[frame]:  # carried while neither place is in view
+                    continue
+                if not (_often(seen_old, 0, frame) and _often(seen_new, frame + 1)):
                     continue
                 new, old = _after(seen_new, frame), _after(seen_old, frame)
                 if new is None or old is None:
@@ -102,7 +112,9 @@ class Scripter:
                 seen = self.sights.seen(cand.object)
                 for frame in self._frames():
                     hidden = bool(shown[frame]) and pixels[frame] < HIDDEN_PIXELS
-                    if (hidden if hidden_only else not seen[frame]) and _after(seen, frame):
+                    if not (_often(seen, 0, frame) and _often(seen, frame + 1)):
+                        continue
+                    if hidden if hidden_only else not seen[frame]:
                         entry: EventEntry = {
                             "frame": frame,
                             "type": "disappear",
@@ -119,7 +131,9 @@ class Scripter:
             assert cand.ghost is not None and cand.to_at is not None
             seen_old, seen_new = self.sights.seen(cand.object), self.sights.seen(cand.ghost)
             for frame in self._frames():
-                if seen_old[frame] or seen_new[frame] or _after(seen_new, frame) is None:
+                if seen_old[frame] or seen_new[frame]:
+                    continue
+                if not (_often(seen_old, 0, frame) and _often(seen_new, frame + 1)):
                     continue
                 entry: EventEntry = {
                     "frame": frame,
@@ -138,7 +152,7 @@ class Scripter:
         for cand, label, size, cover in candidates:
             seen = self.sights.seen(cand.object)
             for frame in self._frames():
-                if seen[frame] or _after(seen, frame) is None:
+                if seen[frame] or not _often(seen, frame + 1):
                     continue
                 entry: EventEntry = {
                     "frame": frame,
@@ -162,7 +176,10 @@ class Scripter:
             for frame in self._frames():
                 if seen_a[frame] or seen_b[frame]:
                     continue
-                if _after(seen_a, frame) is None or _after(seen_b, frame) is None:
+                # Each is known before, and its new place (the other's old one) is seen after.
+                if not (_often(seen_a, 0, frame) and _often(seen_b, 0, frame)):
+                    continue
+                if not (_often(seen_a, frame + 1) and _often(seen_b, frame + 1)):
                     continue
                 entries: list[EventEntry] = [
                     {
@@ -190,12 +207,12 @@ class Scripter:
         for cand in self._free(candidates):
             seen = self.sights.seen(cand.object)
             for leave in self._frames():
-                if seen[leave]:
+                if seen[leave] or not _often(seen, 0, leave):
                     continue
                 for back in range(leave + 30, last):
                     if seen[back] or _after(seen, leave, back) is None:
                         continue
-                    if _after(seen, back) is None:
+                    if not _often(seen, back + 1):
                         continue
                     entries: list[EventEntry] = [
                         {"frame": leave, "type": "disappear", "object": cand.object},

@@ -281,7 +281,7 @@ def _attempt(
     people = _people(rng, planner, house, route, spans, knobs.people, knobs.frames)
 
     # The object that will appear, behind a taller one already there.
-    # Objects that may appear, each behind a taller one already there (one is scripted; the
+    # Up to three objects that may appear, each behind a taller one (one is scripted; the
     # others stay ordinary objects behind their covers).
     appear_pairs: list[tuple[Item, Item]] = []
     coverable = [
@@ -291,7 +291,7 @@ def _attempt(
     ]
     rng.shuffle(coverable)
     for piece in coverable:
-        if len(appear_pairs) >= 2:
+        if len(appear_pairs) >= 3:
             break
         small = rng.choice([label for label in SMALL_BEHIND if label in ON[piece.label]] or ["cup"])
         pair = shelver.place_behind(
@@ -319,7 +319,7 @@ def _attempt(
                 ghosts.append(ghost)
                 transfers.append(Candidate(item.id, item.on, item.at, ghost.id, target.id, spot))
     for item in plain:
-        if len(moves) >= 6:
+        if len(moves) >= 10:
             break
         # A spot 0.25 m or more away on the same top (a spot too close stays unused).
         for _ in range(3):
