@@ -12,9 +12,8 @@ import sys
 from pathlib import Path
 from typing import Literal
 
-import yaml
-
-from sim.generator import generate_world, split_seeds
+from sim.generator import split_seeds
+from sim.generator.files import world_yaml
 
 Split = Literal["dev", "test"]
 SPLITS: tuple[Split, ...] = ("dev", "test")
@@ -34,13 +33,8 @@ def world_files(count: int, split: Split, out: Path, *, active: bool = False) ->
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
     for seed in split_seeds(split, count):
-        mapping = generate_world(seed, active=active)
-        text = (
-            f"# Generated world, {split} split, seed {seed} (`python -m sim.generator --seed "
-            f"{seed}{' --active' if active else ''}` writes the same file).\n"
-            + yaml.safe_dump(mapping, sort_keys=False, default_flow_style=None, width=100)
-        )
-        path = folder / f"{mapping['name']}.yaml"
+        name, text = world_yaml(seed, active=active)
+        path = folder / f"{name}.yaml"
         if not path.is_file() or path.read_text() != text:
             path.write_text(text)
         paths.append(path)

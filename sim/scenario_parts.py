@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, fields
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 from pydantic import Field
 
@@ -22,6 +22,9 @@ from sim.scenario_fields import (
     field_error,
 )
 from sim.world import Box
+
+EventType = Literal["appear", "move", "disappear", "transfer"]
+EVENT_TYPES: tuple[str, ...] = get_args(EventType)
 
 
 @dataclass(frozen=True)
@@ -147,7 +150,7 @@ class EventEntry:
 
     __pydantic_config__ = CHECKED
     frame: Count
-    type: Literal["appear", "move", "disappear", "transfer"]
+    type: EventType
     object: Text
     on: Text | None = None
     at: Vec2 | None = None

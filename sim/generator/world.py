@@ -29,7 +29,7 @@ from sim.generator.route import (
     visit_order,
     walker,
 )
-from sim.generator.visibility import hidden_fraction, sightings
+from sim.generator.visibility import Sightings, hidden_fraction, sightings
 from sim.scenario import ScenarioError, scenario_from_dict
 
 MAX_ATTEMPTS = 30
@@ -245,44 +245,34 @@ def _people(
     return people
 
 
-def _attempt(
-    seed: int, attempt: int, knobs: WorldKnobs, active: bool
+def _active_world(
+    rng: random.Random,
+    name: str,
+    seed: int,
+    attempt: int,
+    knobs: WorldKnobs,
+    house: House,
+    planner: Planner,
+    views: dict[str, list[tuple[float, float]]],
 ) -> tuple[dict[str, Any], WorldNotes]:
-    rng = random.Random(f"pbdag-world:{seed}:{attempt}:{'active' if active else 'dynamic'}")
-    name = f"gen-active-{seed}" if active else f"gen-{seed}"
-    house = build_house(rng, knobs)
-    if house is None:
-        raise _Resample("the drawn furniture does not fit")
-    planner = Planner(house)
-    views = {p.id: planner.viewpoints(p, rng) for p in house.fixtures()}
-    if any(not found for found in views.values()):
-        raise _Resample("a fixture cannot be seen from the walkable floor")
-    shelver = Shelver(rng, house)
-    _items(rng, house, shelver, knobs, views, active)
-    if active:
-        first = rng.choice(house.fixtures())
-        same_room = [p for p in house.fixtures() if p.room == first.room and p.id != first.id]
-        second = rng.choice(same_room or [p for p in house.fixtures() if p.id != first.id])
-        route = build_route(rng, planner, views, [first.id, second.id], 0.0)
-        mapping = _mapping(name, seed, house, knobs.frames, 0.5, house.items, route, [], [])
-        scenario_from_dict(mapping)
-        notes = WorldNotes(seed, attempt, tuple(house.rooms), ())
-        return mapping, notes
-    fixtures = house.fixtures()
-    visits = max(2, min(round(knobs.frames / FRAMES_PER_VISIT), 3 * len(fixtures)))
-    per_visit = knobs.frames / visits
-    gaps = (
-        max(2, round(knobs.revisit_frames[0] / per_visit)),
-        max(2, round(knobs.revisit_frames[1] / per_visit)),
-    )
-    order = visit_order(rng, _tour(rng, house), visits, gaps)
-    route = build_route(rng, planner, views, order, PAUSE_SHARE)
-    spans = visit_frames(route, knobs.frames, float(CAMERA["eye_height"]))
-    people = _people(rng, planner, house, route, spans, knobs.people, knobs.frames)
+    """An active world: the house and its objects, with a short passive walk between two
+    fixtures of one room (the rollout starts from its first point)."""
+    first = rng.choice(house.fixtures())
+    same_room = [p for p in house.fixtures() if p.room == first.room and p.id != first.id]
+    second = rng.choice(same_room or [p for p in house.fixtures() if p.id != first.id])
+    route = build_route(rng, planner, views, [first.id, second.id], 0.0)
+    mapping = _mapping(name, seed, house, knobs.frames, 0.5, house.items, route, [], [])
+    scenario_from_dict(mapping)
+    return mapping, WorldNotes(seed, attempt, tuple(house.rooms), ())
 
-    # The object that will appear, behind a taller one already there.
-    # Up to three objects that may appear, each behind a taller one (one is scripted; the
-    # others stay ordinary objects behind their covers).
+
+def _appear_pairs(
+    rng: random.Random, house: House, shelver: Shelver, views: dict[str, list[tuple[float, float]]]
+) -> list[tuple[Item, Item]]:
+    """(small, cover) pairs: objects placed just behind a taller one as seen from their
+    fixture's viewpoint, candidates for the appearance behind an occluder (up to three: one is
+    scripted to appear, the others stay ordinary objects behind their covers)."""
+    fixtures = house.fixtures()
     appear_pairs: list[tuple[Item, Item]] = []
     coverable = [
         p
@@ -301,11 +291,15 @@ def _attempt(
             appear_pairs.append(pair)
     if not appear_pairs:
         raise _Resample("no fixture has room for an object behind a taller one")
-    covers = set(house.behind.values())
-    plain = [i for i in house.items if i.id not in covers and i.id not in house.behind]
-    rng.shuffle(plain)
+    return appear_pairs
 
-    # Destinations of moves and transfers, stood in for by planning objects ("ghosts").
+
+def _destinations(
+    house: House, shelver: Shelver, plain: list[Item], rng: random.Random
+) -> tuple[list[Item], list[Candidate], list[Candidate]]:
+    """Destinations of transfers and moves, stood in for by planning objects ("ghosts") so the
+    planning render can time when each place is seen."""
+    fixtures = house.fixtures()
     ghosts: list[Item] = []
     transfers: list[Candidate] = []
     moves: list[Candidate] = []
@@ -329,12 +323,21 @@ def _attempt(
                 ghosts.append(ghost)
                 moves.append(Candidate(item.id, item.on, item.at, ghost.id, item.on, spot))
                 break
-    planning = _mapping(
-        name, seed, house, knobs.frames, 0.25, [*house.items, *ghosts], route, people, []
-    )
-    scenario = scenario_from_dict(planning)
-    sights = sightings(scenario, house.rooms)
+    return ghosts, transfers, moves
 
+
+def _script(
+    rng: random.Random,
+    sights: Sightings,
+    knobs: WorldKnobs,
+    house: House,
+    appear_pairs: list[tuple[Item, Item]],
+    plain: list[Item],
+    transfers: list[Candidate],
+    moves: list[Candidate],
+) -> tuple[Scripter, list[Item]]:
+    """The scripted events, timed from what the planning render shows; the objects listed at
+    the start (all but the one that appears)."""
     scripter = Scripter(rng, sights, knobs.frames)
     as_candidate = {i.id: Candidate(i.id, i.on, i.at) for i in house.items}
     appearing = scripter.appear_behind(
@@ -361,11 +364,19 @@ def _attempt(
     scripter.transfer(transfers, new_first=False)
     scripter.move(moves)
     scripter.leave_and_return([as_candidate[i.id] for i in plain])
+    return scripter, listed
 
-    mapping = _mapping(
-        name, seed, house, knobs.frames, 0.25, listed, route, people, scripter.events
-    )
-    scenario_from_dict(mapping)
+
+def _notes(
+    seed: int,
+    attempt: int,
+    house: House,
+    route: Route,
+    spans: list[tuple[int, int]],
+    sights: Sightings,
+    scripter: Scripter,
+) -> WorldNotes:
+    """What the generator put into the world: visits, revisit intervals, covers, hard events."""
     visit_firsts: dict[str, list[int]] = {}
     for visit, (start, _) in zip(route.visits, spans, strict=True):
         visit_firsts.setdefault(visit.fixture, []).append(start)
@@ -390,6 +401,55 @@ def _attempt(
         behind,
         planned,
     )
+    return notes
+
+
+def _attempt(
+    seed: int, attempt: int, knobs: WorldKnobs, active: bool
+) -> tuple[dict[str, Any], WorldNotes]:
+    rng = random.Random(f"pbdag-world:{seed}:{attempt}:{'active' if active else 'dynamic'}")
+    name = f"gen-active-{seed}" if active else f"gen-{seed}"
+    house = build_house(rng, knobs)
+    if house is None:
+        raise _Resample("the drawn furniture does not fit")
+    planner = Planner(house)
+    views = {p.id: planner.viewpoints(p, rng) for p in house.fixtures()}
+    if any(not found for found in views.values()):
+        raise _Resample("a fixture cannot be seen from the walkable floor")
+    shelver = Shelver(rng, house)
+    _items(rng, house, shelver, knobs, views, active)
+    if active:
+        return _active_world(rng, name, seed, attempt, knobs, house, planner, views)
+    fixtures = house.fixtures()
+    visits = max(2, min(round(knobs.frames / FRAMES_PER_VISIT), 3 * len(fixtures)))
+    per_visit = knobs.frames / visits
+    gaps = (
+        max(2, round(knobs.revisit_frames[0] / per_visit)),
+        max(2, round(knobs.revisit_frames[1] / per_visit)),
+    )
+    order = visit_order(rng, _tour(rng, house), visits, gaps)
+    route = build_route(rng, planner, views, order, PAUSE_SHARE)
+    spans = visit_frames(route, knobs.frames, float(CAMERA["eye_height"]))
+    people = _people(rng, planner, house, route, spans, knobs.people, knobs.frames)
+
+    appear_pairs = _appear_pairs(rng, house, shelver, views)
+    covers = set(house.behind.values())
+    plain = [i for i in house.items if i.id not in covers and i.id not in house.behind]
+    rng.shuffle(plain)
+
+    ghosts, transfers, moves = _destinations(house, shelver, plain, rng)
+    planning = _mapping(
+        name, seed, house, knobs.frames, 0.25, [*house.items, *ghosts], route, people, []
+    )
+    scenario = scenario_from_dict(planning)
+    sights = sightings(scenario, house.rooms)
+
+    scripter, listed = _script(rng, sights, knobs, house, appear_pairs, plain, transfers, moves)
+    mapping = _mapping(
+        name, seed, house, knobs.frames, 0.25, listed, route, people, scripter.events
+    )
+    scenario_from_dict(mapping)
+    notes = _notes(seed, attempt, house, route, spans, sights, scripter)
     return mapping, notes
 
 
