@@ -35,6 +35,11 @@ class Candidate:
     to_at: tuple[float, float] | None = None
 
 
+def _placed(frame: int, kind: str, object_id: str, where: Candidate) -> EventEntry:
+    """An event that puts `object_id` where `where` stands (its fixture and spot)."""
+    return {"frame": frame, "type": kind, "object": object_id, "on": where.on, "at": list(where.at)}
+
+
 MIN_SIGHTINGS = 3  # an event object is seen this often before its change, and its result after
 
 
@@ -182,20 +187,8 @@ class Scripter:
                 if not (_often(seen_a, frame + 1) and _often(seen_b, frame + 1)):
                     continue
                 entries: list[EventEntry] = [
-                    {
-                        "frame": frame,
-                        "type": "transfer",
-                        "object": first.object,
-                        "on": second.on,
-                        "at": list(second.at),
-                    },
-                    {
-                        "frame": frame,
-                        "type": "transfer",
-                        "object": second.object,
-                        "on": first.on,
-                        "at": list(first.at),
-                    },
+                    _placed(frame, "transfer", first.object, second),
+                    _placed(frame, "transfer", second.object, first),
                 ]
                 self._add("swap_same_class", entries, f"{first.on} <-> {second.on}")
                 return
@@ -216,13 +209,7 @@ class Scripter:
                         continue
                     entries: list[EventEntry] = [
                         {"frame": leave, "type": "disappear", "object": cand.object},
-                        {
-                            "frame": back,
-                            "type": "appear",
-                            "object": cand.object,
-                            "on": cand.on,
-                            "at": list(cand.at),
-                        },
+                        _placed(back, "appear", cand.object, cand),
                     ]
                     self._add("leave_and_return", entries, f"away {back - leave} frames")
                     return

@@ -132,6 +132,16 @@ def _route_entry(route: Route) -> dict[str, Any]:
     return {"type": "waypoints", "loops": 1, "points": points}
 
 
+def _floor_box(piece: Piece) -> dict[str, Any]:
+    """A fixture's or an occluder's entry of the scenario file."""
+    return {
+        "id": piece.id,
+        "label": piece.label,
+        "center": [_r(piece.center[0]), _r(piece.center[1])],
+        "size": [_r(v) for v in piece.size],
+    }
+
+
 def _mapping(
     name: str,
     seed: int,
@@ -148,26 +158,8 @@ def _mapping(
         for wall in house.walls
         for a, b in wall.segments()
     ]
-    fixtures = [
-        {
-            "id": p.id,
-            "label": p.label,
-            "center": [_r(p.center[0]), _r(p.center[1])],
-            "size": [_r(v) for v in p.size],
-        }
-        for p in house.pieces
-        if p.fixture
-    ]
-    occluders = [
-        {
-            "id": p.id,
-            "label": p.label,
-            "center": [_r(p.center[0]), _r(p.center[1])],
-            "size": [_r(v) for v in p.size],
-        }
-        for p in house.pieces
-        if not p.fixture
-    ]
+    fixtures = [_floor_box(p) for p in house.pieces if p.fixture]
+    occluders = [_floor_box(p) for p in house.pieces if not p.fixture]
     objects = [
         {
             "id": i.id,
