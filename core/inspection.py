@@ -22,13 +22,11 @@ from core.grounding import ground_frame
 from core.lifecycle import capture_decisions
 from core.masks import Mask, mask_iou
 from core.observation import Frame
-from core.params import Params
+from core.params import SUPPORT_SLAB_M, Params
 from core.state import SceneState, Track
 from core.support import SupportSurface, parents_of
 from core.values import InspectionStatus, ViewPose
 from core.visibility import Sighting, observable, samples_passed
-
-SUPPORT_SLAB_M = 0.02  # thickness of the sampled support region (the fixture's top surface)
 
 
 def support_region_visible(fixture: Track, frame: Frame, params: Params) -> int:

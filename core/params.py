@@ -117,6 +117,10 @@ class AssociationParams:
 
 # The log-odds clamp may not exceed this: logistic() of it is still distinguishable from 1.
 MAX_LOGODDS = 30.0
+# Section 3.4's support-region test samples the fixture's top surface as a slab this thick [m]
+# (the paper names the region, not its depth; ours). A constant, not a field: scene params
+# already written to logs must replay to the same state byte for byte.
+SUPPORT_SLAB_M = 0.02
 
 
 @dataclass(frozen=True)
