@@ -74,7 +74,7 @@ eval: setup  ## the paper's protocols on the shipped (development) worlds, seeds
 results: eval  ## and on the generated test split, then the README's tables (see evaluation/README.md for durations)
 	$(BIN)/pbdag eval fixtures --generated 30 --split test --jobs 2 --out $(TEST)/fixtures
 	$(BIN)/pbdag eval dynamic --generated 30 --split test --jobs 2 --out $(TEST)/dynamic
-	$(BIN)/pbdag eval active --generated 6 --split test --jobs 2 --out $(TEST)/active
+	$(BIN)/pbdag eval active --generated 20 --split test --jobs 2 --out $(TEST)/active
 	$(BIN)/python -m evaluation.sweep --jobs 2 --out $(DEV)/sweep
 	$(BIN)/python -m evaluation.publish --dev $(DEV) --test $(TEST)
 

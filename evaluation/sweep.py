@@ -24,8 +24,8 @@ from evaluation.report import code_version
 from evaluation.world_intervals import intervals
 from evaluation.worlds import GENERATED_STREAM_SEED, world_files
 
-DEFAULT_VALUES = (0.2, 0.35, 0.5, 0.65, 0.8, 1.0)
-DEFAULT_METHODS = ("PBD-AG", "ConceptGraphs-inspired", "Append-only")
+DEFAULT_VALUES = (0.25, 0.5, 0.75, 1.0)
+DEFAULT_METHODS = ("PBD-AG", "ConceptGraphs-inspired")
 FIGURES = (("idf1", "IDF1"), ("id_switches", "IDS per world"), ("event_recall", "Event R."))
 
 
@@ -51,7 +51,7 @@ def sweep_table(points: dict[float, list[dict[str, Any]]]) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m evaluation.sweep", description=__doc__)
-    parser.add_argument("--generated", type=int, default=10, help="development worlds (10)")
+    parser.add_argument("--generated", type=int, default=6, help="development worlds (6)")
     parser.add_argument("--values", type=float, nargs="+", default=list(DEFAULT_VALUES))
     parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
     parser.add_argument("--frames", type=int, help="shorten every world to N frames")
