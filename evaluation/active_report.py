@@ -17,6 +17,7 @@ import numpy as np
 from evaluation.active import ORDERS
 from evaluation.confidence import mean_interval, spelled
 from evaluation.metrics import mean_std
+from evaluation.world_intervals import over
 from sim.rollout import RolloutResult
 
 # The paper's Table 3 (mean ± sample std over three seeds per scene; nine rollouts pooled).
@@ -84,10 +85,10 @@ def interval_table(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int]) ->
     """Per order: coarse and fine F1, and fine F1 at each budget, each with its 95% bootstrap
     interval over world-seed rollouts."""
     orders = [o for o in ORDERS if any(r["order"] == o for r in rows)]
-    runs = len({(r["scenario"], r["seed"]) for r in rows})
     titles = ["coarse F1", "fine F1", *(f"fine F1 @ {b}" for b in budgets)]
     lines = [
-        f"Over {runs} world-seed rollouts; 95% bootstrap intervals over them in brackets.",
+        f"{over(rows)}, each order rolled out once per run; 95% bootstrap intervals over them "
+        "in brackets.",
         "",
         "| order | " + " | ".join(titles) + " |",
         "| --- | " + " | ".join("---" for _ in titles) + " |",

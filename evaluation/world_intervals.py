@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from evaluation.confidence import Interval, mean_interval, ratio_interval, spelled
@@ -62,13 +62,21 @@ def intervals_json(protocol: str, rows: Sequence[dict[str, Any]]) -> dict[str, A
     }
 
 
+def over(rows: Sequence[Mapping[str, Any]]) -> str:
+    """What the intervals resample: `Over 30 worlds`, or `Over 15 runs (5 worlds x seeds)`."""
+    runs = len({(r["scenario"], r["seed"]) for r in rows})
+    worlds = len({r["scenario"] for r in rows})
+    return (
+        f"Over {runs} worlds" if runs == worlds else f"Over {runs} runs ({worlds} worlds x seeds)"
+    )
+
+
 def interval_table(protocol: str, rows: Sequence[dict[str, Any]]) -> str:
     """Markdown: one row per method, each cell `value [low, high]`."""
     table = intervals(protocol, rows)
     figures = _figures(protocol)
-    worlds = len({(r["scenario"], r["seed"]) for r in ran(rows)})
     lines = [
-        f"Over {worlds} worlds; 95% bootstrap intervals over worlds in brackets.",
+        f"{over(ran(rows))}; 95% bootstrap intervals over them in brackets.",
         "",
         "| Method | " + " | ".join(title for _, title, _ in figures) + " |",
         "|---|" + "---|" * len(figures),
