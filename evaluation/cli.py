@@ -355,7 +355,7 @@ def loadable(given: list[Path] | None, defaults: list[str]) -> list[Path] | None
             load_scenario(path)
         except (ScenarioError, OSError) as error:
             if given:
-                print(f"pbdag eval: {path}: {error}", file=sys.stderr)
+                print(f"pbdag eval: --scenario: {path}: {error}", file=sys.stderr)
                 return None
             print(f"pbdag eval: leaving out {path.name}: {error}", file=sys.stderr)
             continue
