@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import multiprocessing
 import sys
 import time
@@ -228,13 +229,15 @@ def run_protocol(
     (scenario, seed) whatever the order the streams finish in.
     """
     work = [(path, seed) for path in scenario_paths for seed in seeds]
+    # One task for both paths, so what a stream is run with cannot differ between them.
+    task = functools.partial(
+        run_stream, protocol, methods=methods, frames=frames, scenario_overrides=scenario_overrides
+    )
     if jobs <= 1 or len(work) <= 1:
         return [
             row
             for path, seed in work
-            for row in run_stream(
-                protocol, path, seed, methods, via_service, progress, frames, scenario_overrides
-            )
+            for row in task(path, seed, via_service=via_service, progress=progress)
         ]
     if via_service is not None:
         raise ValueError("jobs: streams through a service run one at a time (use jobs=1)")
@@ -244,10 +247,7 @@ def run_protocol(
     started = time.monotonic()
     with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
         futures = {
-            pool.submit(run_stream, protocol, path, seed, methods, None, False, frames): (
-                path,
-                seed,
-            )
+            pool.submit(task, path, seed, via_service=None, progress=False): (path, seed)
             for path, seed in work
         }
         for future in as_completed(futures):

@@ -66,10 +66,14 @@ def test_the_interval_table_has_one_row_per_method_and_every_figure() -> None:
     assert "| PBD-AG | .800 [" in text
 
 
+OVERRIDES = {"detector": {"appearance": {"distinctiveness": 0.3}}}
+
+
 @pytest.fixture(scope="module")
 def generated_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("generated")
     common = ["eval", "fixtures", "--generated", "2", "--split", "test", "--frames", "16"]
+    common += ["--scenario-overrides", json.dumps(OVERRIDES)]
     assert main([*common, "--methods", "PBD-AG", "--quiet", "--jobs", "2", "--out", str(out)]) == 0
     return out
 
@@ -101,7 +105,16 @@ def test_generated_and_given_worlds_exclude_each_other(
     assert not (tmp_path / "results.json").exists()
 
 
-def test_scenario_overrides_reach_every_world_and_a_bad_one_is_refused_first(
+def test_scenario_overrides_reach_every_world_in_every_worker(generated_run: Path) -> None:
+    results = json.loads((generated_run / "results.json").read_text())
+    assert results["scenario_overrides"] == OVERRIDES
+    for run in results["runs"]:  # each stream was simulated from the overridden scenario
+        world = load_scenario(run["scenario_file"], OVERRIDES, frames=16)
+        plain = load_scenario(run["scenario_file"], frames=16)
+        assert run["scenario_sha256"] == world.sha256 != plain.sha256
+
+
+def test_a_bad_scenario_override_is_refused_before_anything_runs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     common = ["eval", "fixtures", "--generated", "1", "--frames", "8", "--quiet"]
@@ -110,9 +123,3 @@ def test_scenario_overrides_reach_every_world_and_a_bad_one_is_refused_first(
     assert main([*common, "--scenario-overrides", bad]) == 2
     assert "detector.appearance.distinctiveness" in capsys.readouterr().err
     assert not (tmp_path / "results.json").exists()
-    good = {"detector": {"appearance": {"distinctiveness": 0.3}}}
-    assert main([*common, "--scenario-overrides", json.dumps(good)]) == 0
-    results = json.loads((tmp_path / "results.json").read_text())
-    assert results["scenario_overrides"] == good
-    world = load_scenario(results["runs"][0]["scenario_file"], good, frames=8)
-    assert results["runs"][0]["scenario_sha256"] == world.sha256
