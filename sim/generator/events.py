@@ -13,13 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pbdag_errors import Refused
 from sim.generator.knobs import HardEvent
 from sim.generator.visibility import HIDDEN_PIXELS, Sightings
 
 EventEntry = dict[str, object]
 
 
-class Unscriptable(Exception):
+class Unscriptable(Refused):
     """No frame of the route fits an event: the generator draws the world again."""
 
 

@@ -8,6 +8,7 @@ import math
 import random
 from typing import Any
 
+from pbdag_errors import Refused
 from sim.generator.events import Candidate, EventEntry, Scripter, Unscriptable
 from sim.generator.knobs import WorldKnobs, WorldNotes, active_knobs
 from sim.generator.layout import (
@@ -50,11 +51,11 @@ FRAMES_PER_VISIT = 11  # a dynamic world's route stops about once per this many 
 PAUSE_SHARE = 0.5  # share of the lap the robot stands at its viewpoints
 
 
-class GenerationError(RuntimeError):
+class GenerationError(Refused, RuntimeError):
     """No deterministic resample of this seed gave a world that passes every check."""
 
 
-class _Resample(Exception):
+class _Resample(Refused):
     """This draw does not work out; try the next one."""
 
 
