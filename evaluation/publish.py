@@ -64,7 +64,8 @@ def provenance(results: Mapping[str, Any]) -> str:
     else:
         where = f"{len({r['scenario'] for r in runs})} shipped worlds"
     seeds = ", ".join(map(str, results["seeds"]))
-    return f"{where}, seeds {seeds}, code {results['code_version']}"
+    kind = "stream seed" if worlds and len(results["seeds"]) == 1 else "seeds"
+    return f"{where}, {kind} {seeds}, code {results['code_version']}"
 
 
 def table_of(protocol: str, results: Mapping[str, Any]) -> str:

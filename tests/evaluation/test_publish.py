@@ -44,7 +44,7 @@ def test_publish_writes_test_and_development_tables_between_the_markers(tmp_path
     text = readme.read_text()
     assert text.startswith("# Title\n\nbefore\n") and text.endswith(f"{END}\nafter\n")
     assert "old figures" not in text
-    assert "**Test split** (3 generated test-split worlds, seeds 7, code abc)" in text
+    assert "**Test split** (3 generated test-split worlds, stream seed 7, code abc)" in text
     assert "| PBD-AG | 1.000 [1.000, 1.000] | .800 [" in text
     assert "**Development** (1 shipped worlds" in text
     assert "Test split: not run yet." in text  # the dynamic and active runs are absent
