@@ -11,16 +11,8 @@ from typing import Any
 from pbdag_errors import Refused
 from sim.generator.events import Candidate, EventEntry, Scripter, Unscriptable
 from sim.generator.knobs import WorldKnobs, WorldNotes, active_knobs
-from sim.generator.layout import (
-    ON,
-    TALL_ON,
-    WALL_HEIGHT,
-    House,
-    Item,
-    Piece,
-    Shelver,
-    build_house,
-)
+from sim.generator.layout import WALL_HEIGHT, House, Item, Piece, build_house
+from sim.generator.objects import ON, TALL_ON, Shelver
 from sim.generator.route import (
     Planner,
     Route,
