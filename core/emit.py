@@ -4,6 +4,7 @@ audit events"). Each event states the track's lifecycle after it."""
 from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
+from typing import TypedDict
 
 from core.decisions import (
     FixtureSighting,
@@ -35,7 +36,7 @@ from core.events import (
 from core.fixtures import FixtureProposal
 from core.geometry import Proposal
 from core.params import Params
-from core.values import LifecycleState, Observation, vec3
+from core.values import LifecycleState, Observation, Vec3, vec3
 
 
 def batch_events(
@@ -244,29 +245,30 @@ def _object_event(decision: TrackDecision, sighting: ObjectSighting) -> Event:
     )
 
 
+class _FixtureFields(TypedDict):
+    """What a fixture's first sighting and each later one record alike."""
+
+    track_id: str
+    state: LifecycleState
+    frame_id: str | None
+    observations: tuple[Observation, ...]
+    center: Vec3
+    margin: float
+    best_frame: str | None
+    best_frame_support: int
+    existence_logodds: float
+    p_exist: float
+    batches_observed: int
+    timestamp: float
+
+
 def _fixture_event(decision: TrackDecision, sighting: FixtureSighting) -> Event:
     existence, proposal = sighting.existence, sighting.proposal
-    observations = _fixture_observation(proposal, sighting.batch_frame)
-    if sighting.new:
-        return FixtureAdded(
-            track_id=sighting.track_id,
-            state=decision.lifecycle,
-            frame_id=sighting.frame_id,
-            observations=observations,
-            center=sighting.center,
-            margin=proposal.margin,
-            best_frame=sighting.best_frame,
-            best_frame_support=sighting.best_frame_support,
-            existence_logodds=existence.logodds,
-            p_exist=existence.p_exist,
-            batches_observed=existence.batches_observed,
-            timestamp=sighting.timestamp,
-        )
-    return FixtureObserved(
+    fields = _FixtureFields(
         track_id=sighting.track_id,
         state=decision.lifecycle,
         frame_id=sighting.frame_id,
-        observations=observations,
+        observations=_fixture_observation(proposal, sighting.batch_frame),
         center=sighting.center,
         margin=proposal.margin,
         best_frame=sighting.best_frame,
@@ -274,9 +276,11 @@ def _fixture_event(decision: TrackDecision, sighting: FixtureSighting) -> Event:
         existence_logodds=existence.logodds,
         p_exist=existence.p_exist,
         batches_observed=existence.batches_observed,
-        reacquired=existence.reacquired,
         timestamp=sighting.timestamp,
     )
+    if sighting.new:
+        return FixtureAdded(**fields)
+    return FixtureObserved(**fields, reacquired=existence.reacquired)
 
 
 def _observations(
