@@ -78,7 +78,11 @@ def graph_events(
         if sum((x - y) ** 2 for x, y in zip(a.center, b.center, strict=True)) >= 0.35**2:
             events.append(MethodEvent(frame, track_id, TrackMoved))
         if b.parent is not None and b.parent != a.parent:
-            events.append(MethodEvent(frame, track_id, TrackReparented, new_parent=b.parent))
+            events.append(
+                MethodEvent(
+                    frame, track_id, TrackReparented, new_parent=b.parent, old_parent=a.parent
+                )
+            )
     return sorted(events, key=lambda e: (e.kind.type, e.track_id))
 
 

@@ -10,7 +10,11 @@ BDD100K match within a class) and as the false-absence measure already asks: a n
 an object only when it is within 0.5 m and carries the object's label. Without the label, on a
 cluttered table a remote is "tracked" by the node of the mug beside it, and the mug's own move
 is scored missed because the assignment handed its track to the remote. `class_aware=False`
-gives the class-agnostic reading, which the reports keep beside it.
+gives the class-agnostic reading. Identity switches are read class-agnostic in every headline
+(the strict reading: a track handed from one object to another counts whatever the labels, and
+the count does not rest on the label rule, which came after the first results); the
+class-aware count is printed beside it as the lenient one. IDF1 and the assignment stay
+class-aware.
 """
 
 from __future__ import annotations

@@ -32,16 +32,20 @@ class FramePrediction:
 class MethodEvent:
     """A change a method showed about one track while processing a frame: the class of the core
     event it is (or, for a method whose only output is its graph, the one it stands for), the
-    new parent of a reparent, and the event itself when the method emitted one."""
+    new and old parents of a reparent, and the event itself when the method emitted one."""
 
     frame: int  # index of the frame being processed when the event was emitted
     track_id: str
     kind: type[TrackEvent]
     new_parent: str | None = None
     event: TrackEvent | None = None
+    old_parent: str | None = None  # a reparent's parent before it (None: its first parent)
 
     @classmethod
     def of(cls, frame: int, event: TrackEvent) -> MethodEvent:
         """A core event as the method event it is."""
-        new_parent = event.new_parent if isinstance(event, TrackReparented) else None
-        return cls(frame, event.track_id, type(event), new_parent, event)
+        if isinstance(event, TrackReparented):
+            return cls(
+                frame, event.track_id, type(event), event.new_parent, event, event.old_parent
+            )
+        return cls(frame, event.track_id, type(event), None, event)

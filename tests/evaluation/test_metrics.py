@@ -11,7 +11,9 @@ from evaluation.change_metrics import (
     class_false_absence,
     event_recall,
     false_absence,
+    identity_before,
     latency_summary,
+    lenient_event_recall,
 )
 from evaluation.metrics import (
     fixture_scores,
@@ -195,7 +197,7 @@ def test_presence_counts_ghosts_missing_tracks_far_tracks_and_unassigned_objects
     assert (loose.tp, loose.fp, loose.fn) == (6, 3, 2)
 
 
-def test_event_recall_per_event_type() -> None:
+def test_lenient_event_recall_per_event_type() -> None:
     assignment = {"mug": "t1", "book": "t2", "bowl": "t3", "cup": "t4"}
     fixture_map = {"table": "F1", "counter": "F2"}
     scheduled = [
@@ -220,7 +222,7 @@ def test_event_recall_per_event_type() -> None:
         MethodEvent(8, "t1", TrackReparented, new_parent="F2"),
         MethodEvent(10, "t4", TrackConfirmed),
     ]
-    result = event_recall(scheduled, method_events, assignment, fixture_map, n_frames=10)
+    result = lenient_event_recall(scheduled, method_events, assignment, fixture_map, n_frames=10)
     assert [outcome.recalled for outcome in result.per_event] == [
         True,
         False,
@@ -255,7 +257,7 @@ def test_event_latency_counts_batches_from_the_first_observable_frame() -> None:
         MethodEvent(5, "t3", TrackMoved),
         MethodEvent(12, "t3", TrackMoved),
     ]
-    result = event_recall(
+    result = lenient_event_recall(
         scheduled,
         method_events,
         assignment,
@@ -271,6 +273,145 @@ def test_event_latency_counts_batches_from_the_first_observable_frame() -> None:
     assert (result.recalled, result.recalled_any, result.unobservable, result.total) == (2, 3, 1, 4)
     assert latency_summary([1, 13, 0]) == (1.0, 13)
     assert latency_summary([1, 4]) == (2.5, 4) and latency_summary([]) is None
+
+
+TABLE_TO_COUNTER = {"table": "F1", "counter": "F2"}
+
+
+def transfer_world() -> list[FrameTruth]:
+    """A cup on the table at the origin (frames 0-3), carried to the counter 3 m away at frame 4
+    (frames 4-9)."""
+    return truth_frames(
+        *([truth_object("cup")] for _ in range(4)),
+        *([truth_object("cup", FAR)] for _ in range(6)),
+    )
+
+
+def test_a_new_track_at_the_new_place_is_not_the_transfer() -> None:
+    # t1 stands for the cup on the table (frames 0-3) and stays there, stale, until frame 5; a
+    # new track t2 is published on the counter from frame 5 (5 frames against t1's 4, so the
+    # run's assignment gives the cup t2), its first parent event (from none) at frame 5. The
+    # lenient reading takes that for the transfer; the identity the cup had before it is t1,
+    # which never reaches the counter, so the strict reading finds no transfer.
+    truth = transfer_world()
+    predictions = prediction_frames(
+        *([node("t1")] for _ in range(5)),
+        *([node("t2", FAR)] for _ in range(5)),
+    )
+    assignment = global_assignment(truth, predictions)
+    assert assignment == {"cup": "t2"}
+    transfer = [ScheduledEvent(4, "transfer", "cup", parent="counter")]
+    first_parent = [MethodEvent(5, "t2", TrackReparented, new_parent="F2", old_parent=None)]
+    lenient = lenient_event_recall(transfer, first_parent, assignment, TABLE_TO_COUNTER, len(truth))
+    assert (lenient.recalled, lenient.per_event[0].recalled_frame) == (1, 5)
+    assert identity_before(transfer[0], assignment, truth, predictions) is None
+    strict = event_recall(transfer, first_parent, assignment, TABLE_TO_COUNTER, truth, predictions)
+    assert (strict.recalled, strict.recalled_any, strict.total) == (0, 0, 1)
+    assert strict.per_event[0].recalled_frame is None
+
+
+def test_the_old_identity_reparented_at_the_new_place_counts_in_both_readings() -> None:
+    # t1 stands for the cup on the table, then on the counter from frame 6, reparented from the
+    # table's node F1 to F2 at frame 6: the same identity at the new place, in both readings.
+    truth = transfer_world()
+    predictions = prediction_frames(
+        *([node("t1")] for _ in range(6)),
+        *([node("t1", FAR)] for _ in range(4)),
+    )
+    assignment = global_assignment(truth, predictions)
+    assert assignment == {"cup": "t1"}
+    transfer = [ScheduledEvent(4, "transfer", "cup", parent="counter")]
+    reparented = [MethodEvent(6, "t1", TrackReparented, new_parent="F2", old_parent="F1")]
+    assert identity_before(transfer[0], assignment, truth, predictions) == "t1"
+    strict = event_recall(transfer, reparented, assignment, TABLE_TO_COUNTER, truth, predictions)
+    lenient = lenient_event_recall(transfer, reparented, assignment, TABLE_TO_COUNTER, len(truth))
+    assert strict.per_event[0].recalled_frame == lenient.per_event[0].recalled_frame == 6
+    assert strict.recalled == lenient.recalled == 1
+    # The same track's first parent (it had none on the table) is not a change of parent: only
+    # the lenient reading counts it.
+    first_parent = [MethodEvent(6, "t1", TrackReparented, new_parent="F2", old_parent=None)]
+    assert (
+        event_recall(
+            transfer, first_parent, assignment, TABLE_TO_COUNTER, truth, predictions
+        ).recalled
+        == 0
+    )
+    assert (
+        lenient_event_recall(
+            transfer, first_parent, assignment, TABLE_TO_COUNTER, len(truth)
+        ).recalled
+        == 1
+    )
+
+
+def test_a_strict_move_waits_for_the_old_identity_to_stand_at_the_new_place() -> None:
+    # The cup moves 3 m at frame 4. t1 stands for it before; its TrackMoved at frame 4 leaves it
+    # 1 m short of the cup (frames 4-6) and it reaches the cup at frame 7. Lenient: reflected at
+    # the move event (frame 4); strict: at frame 7, when the old identity stands where the cup
+    # now is. Two frames a batch, bound 1 batch from the observable frame 4: the strict latency
+    # (batch 3 - batch 2 = 1) is within it, so both count; with a bound of 0 only the lenient one.
+    truth = transfer_world()
+    short_of_it: Vec3 = (2.0, 0.0, 0.0)
+    predictions = prediction_frames(
+        *([node("t1")] for _ in range(4)),
+        *([node("t1", short_of_it)] for _ in range(3)),
+        *([node("t1", FAR)] for _ in range(3)),
+    )
+    assignment = global_assignment(truth, predictions)
+    move = [ScheduledEvent(4, "move", "cup")]
+    moved = [MethodEvent(4, "t1", TrackMoved)]
+    strict = event_recall(move, moved, assignment, {}, truth, predictions)
+    lenient = lenient_event_recall(move, moved, assignment, {}, len(truth))
+    assert (strict.per_event[0].recalled_frame, lenient.per_event[0].recalled_frame) == (7, 4)
+    strict_tight = event_recall(move, moved, assignment, {}, truth, predictions, None, 2, 0)
+    lenient_tight = lenient_event_recall(move, moved, assignment, {}, len(truth), None, 2, 0)
+    assert (strict_tight.recalled, lenient_tight.recalled) == (0, 1)
+    # A track that never stood for the cup before the move is not its identity, whatever the
+    # run's assignment: t9 appears on the new place at frame 4 and outlasts t1 there.
+    replaced = prediction_frames(
+        *([node("t1")] for _ in range(3)),
+        *([node("t9", FAR)] for _ in range(7)),
+    )
+    assignment = global_assignment(truth, replaced)
+    assert assignment == {"cup": "t9"}
+    late = [MethodEvent(6, "t9", TrackMoved)]
+    assert lenient_event_recall(move, late, assignment, {}, len(truth)).recalled == 1
+    assert event_recall(move, late, assignment, {}, truth, replaced).recalled == 0
+
+
+def test_appear_and_disappear_read_the_same_in_both_readings() -> None:
+    # The mug appears at frame 2 (t1 confirmed at 3) and disappears at frame 6 (t1 removed at 7).
+    mug = truth_object("mug")
+    gone = truth_object("mug", present=False)
+    truth = truth_frames([gone], [gone], *([mug] for _ in range(4)), [gone], [gone])
+    predictions = prediction_frames([], [], [], *([node("t1")] for _ in range(4)), [])
+    scheduled = [
+        ScheduledEvent(2, "appear", "mug", parent="table"),
+        ScheduledEvent(6, "disappear", "mug"),
+    ]
+    events = [MethodEvent(3, "t1", TrackConfirmed), MethodEvent(7, "t1", TrackRemoved)]
+    assignment = global_assignment(truth, predictions)
+    strict = event_recall(scheduled, events, assignment, {"table": "F1"}, truth, predictions)
+    lenient = lenient_event_recall(scheduled, events, assignment, {"table": "F1"}, len(truth))
+    assert [o.recalled_frame for o in strict.per_event] == [3, 7]
+    assert [o.recalled_frame for o in lenient.per_event] == [3, 7]
+
+
+def test_identity_conditioned_false_absence_is_not_covered_by_a_neighbour_of_the_class() -> None:
+    # Two mugs 0.3 m apart, each with its own track, both published at frames 0-1. At frames 2-3
+    # mug a's track ta is unpublished while b's tb, 0.3 m from a, stays. Identity-conditioned
+    # (strict): a is eligible at 1-3 and absent at 2-3, b eligible at 1-3 -> 2/6. Identity-
+    # agnostic (lenient): tb is a mug node within 0.5 m of a, so a is never absent -> 0/6.
+    beside: Vec3 = (0.3, 0.0, 0.0)
+    truth = truth_frames(*([truth_object("a"), truth_object("b", beside)] for _ in range(4)))
+    predictions = prediction_frames(
+        *([node("ta"), node("tb", beside)] for _ in range(2)),
+        *([node("tb", beside)] for _ in range(2)),
+    )
+    strict = false_absence(truth, predictions, {"a": "ta", "b": "tb"})
+    assert (strict.absent, strict.eligible, strict.by_object) == (2, 6, {"a": 2})
+    lenient = class_false_absence(truth, predictions)
+    assert (lenient.absent, lenient.eligible) == (0, 6)
 
 
 def test_false_absence_counts_only_after_first_publication() -> None:
