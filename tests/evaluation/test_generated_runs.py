@@ -23,6 +23,8 @@ def world_row(scenario: str, method: str, idf1: float, recalled: int) -> dict[st
         "idf1": idf1,
         "id_presence_f1": idf1,
         "id_switches": 1,
+        "id_switches_any_class": 3,
+        "events_recalled_identity": recalled - 1,
         "events_recalled": recalled,
         "events_total": 4,
         "false_absent_checkpoints": 0,
@@ -59,11 +61,37 @@ def test_the_interval_table_has_one_row_per_method_and_every_figure() -> None:
     ]
     table = intervals("dynamic", rows)
     assert set(table) == {"PBD-AG", "B"}
-    assert table["PBD-AG"]["event_recall"].value == pytest.approx(9 / 12)
-    assert table["PBD-AG"]["false_absence_identity"].value == pytest.approx(0.1)
+    # The strict headline and the lenient reading beside it: events 6/12 and 9/12, switches
+    # 3 (class-agnostic) and 1 (class-aware) per world, false absence 1/10 and 0/10.
+    figures = table["PBD-AG"]
+    assert figures["event_recall_identity"].value == pytest.approx(6 / 12)
+    assert figures["event_recall"].value == pytest.approx(9 / 12)
+    assert (figures["id_switches_any_class"].value, figures["id_switches"].value) == (3.0, 1.0)
+    assert figures["false_absence_identity"].value == pytest.approx(0.1)
+    assert figures["false_absence"].value == 0.0
     text = interval_table("dynamic", rows)
     assert "Over 3 worlds" in text
     assert "| PBD-AG | .800 [" in text
+    assert (
+        "| IDS↓ (per world) | IDS class-aware (lenient)↓ | Event R.↑ | Event R. lenient↑ |" in text
+    )
+    assert "Headlines read strictly" in text and "shown as -" not in text
+
+
+def test_runs_written_before_the_strict_readings_show_a_dash_and_name_the_missing_keys() -> None:
+    old = [world_row(f"gen-{k}", "PBD-AG", 0.8, 3) for k in range(2)]
+    for row in old:
+        del row["events_recalled_identity"], row["id_switches_any_class"]
+    table = intervals("dynamic", old)
+    assert "event_recall_identity" not in table["PBD-AG"]
+    assert "id_switches_any_class" not in table["PBD-AG"]
+    assert table["PBD-AG"]["event_recall"].value == pytest.approx(6 / 8)
+    text = interval_table("dynamic", old)
+    line = next(line for line in text.splitlines() if line.startswith("| PBD-AG"))
+    cells = [cell.strip() for cell in line.strip("|").split("|")]
+    assert cells[3] == "-" and cells[5] == "-"  # IDS and Event R., the strict headlines
+    assert cells[4].startswith("1.000") and cells[6].startswith(".750")
+    assert "`id_switches_any_class`, `events_recalled_identity`" in text
 
 
 OVERRIDES = {"detector": {"appearance": {"distinctiveness": 0.3}}}

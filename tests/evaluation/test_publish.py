@@ -24,6 +24,28 @@ def fixture_run(scenario: str, f1: float) -> dict[str, Any]:
     }
 
 
+def dynamic_run(scenario: str, strict: bool) -> dict[str, Any]:
+    """A dynamic run's row; `strict`: written since the strict readings (else the keys an older
+    results.json holds)."""
+    row = {
+        "scenario": scenario,
+        "seed": 7,
+        "method": "PBD-AG",
+        "idf1": 0.8,
+        "id_presence_f1": 0.8,
+        "id_switches": 0,
+        "events_recalled": 4,
+        "events_total": 4,
+        "false_absent_checkpoints": 0,
+        "eligible_checkpoints": 10,
+        "false_absent_checkpoints_identity": 1,
+        "eligible_checkpoints_identity": 10,
+    }
+    if strict:
+        row |= {"id_switches_any_class": 2, "events_recalled_identity": 1}
+    return row
+
+
 def write(folder: Path, runs: list[dict[str, Any]], worlds: dict[str, Any] | None) -> None:
     folder.mkdir(parents=True)
     document = {"code_version": "abc", "seeds": [7], "generated_worlds": worlds, "runs": runs}
@@ -64,3 +86,28 @@ def test_publish_refuses_without_runs_or_without_markers(
     assert main([*args, "--page", str(tmp_path / "R.md")]) == 2
     assert "no <!-- results:start --> ... <!-- results:end --> block" in capsys.readouterr().err
     assert readme.read_text() == "no markers\n"
+
+
+def test_publish_reads_the_strict_headlines_and_names_what_an_older_run_lacks(
+    tmp_path: Path,
+) -> None:
+    worlds = {"split": "test", "count": 2, "world_seeds": [1, 2]}
+    write(tmp_path / "test" / "dynamic", [dynamic_run(f"gen-{k}", True) for k in (0, 1)], worlds)
+    write(tmp_path / "dev" / "dynamic", [dynamic_run("office", False)], None)
+    readme = tmp_path / "README.md"
+    readme.write_text(f"{START}\n{END}\n")
+    args = ["--test", str(tmp_path / "test"), "--dev", str(tmp_path / "dev")]
+    assert main([*args, "--readme", str(readme), "--page", str(tmp_path / "R.md")]) == 0
+    text = readme.read_text()
+    test_part, dev_part = text.split("**Development**")
+    # Test split: IDS 2 (class-agnostic) before the class-aware 0, Event R. 1/4 before the
+    # lenient 4/4, False abs. identity-conditioned .100 before the agnostic .000.
+    assert (
+        "| PBD-AG | .800 [.800, .800] | .800 [.800, .800] | 2.000 [2.000, 2.000] "
+        "| .000 [.000, .000] | .250 [.250, .250] | 1.000 [1.000, 1.000] | .100 [.100, .100] "
+        "| .000 [.000, .000] |" in test_part
+    )
+    assert "shown as -" not in test_part
+    # The older development run: its strict IDS and Event R. are dashes, and named.
+    assert "| .800 [.800, .800] | - | .000 [.000, .000] | - | 1.000 [1.000, 1.000] |" in dev_part
+    assert "`id_switches_any_class`, `events_recalled_identity`" in dev_part
