@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from core.belief import class_compatibility, class_distribution
+from core.belief import class_distribution, classes_agree
 from core.geometry import Proposal
 from core.params import AssociationParams
 
@@ -68,13 +68,11 @@ def associate(
         near = distances < params.max_center_distance_m
         if pool.eligible is not None:
             near &= pool.eligible
-        observed = class_distribution(proposal.label, proposal.class_scores)
         for i in (int(k) for k in np.flatnonzero(near)):
             if pool.kinds[i] != proposal.kind:
                 continue
-            if (
-                class_compatibility(pool.class_belief_of(i), observed)
-                < params.min_class_compatibility
+            if not classes_agree(
+                pool.class_belief_of(i), proposal.label, proposal.class_scores, params
             ):
                 continue
             if not appearance_agrees(
@@ -122,28 +120,29 @@ def _fallback(
     taken: set[int] = set()
     for j in free:
         proposal = proposals[j]
-        observed = class_distribution(proposal.label, proposal.class_scores)
         same_class = [
             int(i)
             for i in candidates
             if int(i) not in taken
             and pool.kinds[int(i)] == proposal.kind
-            and class_compatibility(pool.class_belief_of(int(i)), observed)
-            >= params.min_class_compatibility
+            and classes_agree(
+                pool.class_belief_of(int(i)), proposal.label, proposal.class_scores, params
+            )
         ]
         if not same_class:
             continue
-        choice = _by_appearance(proposal, same_class, pool, params)
+        choice = (
+            _by_appearance(proposal, same_class, pool, params)
+            if params.fallback_ranks_by_appearance
+            else None
+        )
         if choice is None:
             rivals = [
                 k
                 for k in free
                 if k != j
                 and proposals[k].kind == proposal.kind
-                and class_compatibility(
-                    class_distribution(proposals[k].label, proposals[k].class_scores), observed
-                )
-                >= params.min_class_compatibility
+                and _proposals_agree(proposals[k], proposal, params)
             ]
             if (
                 len(same_class) != 1
@@ -248,17 +247,20 @@ def _piece_of(
 ) -> bool:
     if piece.kind != whole.kind:
         return False
-    observed = class_distribution(piece.label, piece.class_scores)
-    if (
-        class_compatibility(class_distribution(whole.label, whole.class_scores), observed)
-        < params.min_class_compatibility
-    ):
+    if not _proposals_agree(whole, piece, params):
         return False
     if not appearance_agrees(whole.embedding, piece.embedding, params.min_appearance_cosine):
         return False
     low = np.minimum(piece.center - piece.extent / 2, whole.center - whole.extent / 2)
     high = np.maximum(piece.center + piece.extent / 2, whole.center + whole.extent / 2)
     return bool(np.all(high - low <= params.fragment_max_growth * upright_size(size)))
+
+
+def _proposals_agree(a: Proposal, b: Proposal, params: AssociationParams) -> bool:
+    """Class agreement of two detections (the gate's, with `a`'s evidence as the belief)."""
+    return classes_agree(
+        class_distribution(a.label, a.class_scores), b.label, b.class_scores, params
+    )
 
 
 def upright_size(size: FloatArray) -> FloatArray:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-from core.params import ExistenceParams
+from core.params import AssociationParams, ExistenceParams
 
 
 def update_existence(
@@ -31,14 +31,17 @@ def update_existence(
     return min(params.logodds_max, max(params.logodds_min, updated))
 
 
-def class_distribution(label: str, scores: Mapping[str, float] | None) -> dict[str, float]:
+def class_distribution(
+    label: str, scores: Mapping[str, float] | None, from_scores: bool = True
+) -> dict[str, float]:
     """A detection's class evidence: its scores clipped at 0 and normalized, else its label.
 
     An ordinary observation adds unit evidence (section 3.3); spread over the classes the
-    detector scored, so that a label flickering between confusable classes (cup/mug) builds one
-    class belief instead of two tracks.
+    detector scored (ours, `fusion.class_evidence_from_scores`), so that a label flickering
+    between confusable classes (cup/mug) builds one class belief instead of two tracks. With
+    `from_scores` False it is the paper's: the unit goes to the label.
     """
-    if scores:
+    if scores and from_scores:
         positive = {name: max(float(value), 0.0) for name, value in scores.items()}
         positive[label] = positive.get(label, 0.0)
         total = sum(positive.values())
@@ -50,6 +53,21 @@ def class_distribution(label: str, scores: Mapping[str, float] | None) -> dict[s
 def class_compatibility(belief: Mapping[str, float], observed: Mapping[str, float]) -> float:
     """How likely a track and a detection name the same class: sum_c p_track(c) q_det(c)."""
     return sum(p * observed.get(name, 0.0) for name, p in belief.items())
+
+
+def classes_agree(
+    belief: Mapping[str, float],
+    label: str,
+    scores: Mapping[str, float] | None,
+    params: AssociationParams,
+) -> bool:
+    """Class agreement of the association gate between a class belief and a detection: ours,
+    their soft compatibility reaches `min_class_compatibility`; the paper's
+    (`soft_class_agreement` False), the detection's label is the belief's most likely class."""
+    if params.soft_class_agreement:
+        observed = class_distribution(label, scores)
+        return class_compatibility(belief, observed) >= params.min_class_compatibility
+    return most_supported(belief) == label
 
 
 def add_support_evidence(

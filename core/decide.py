@@ -16,14 +16,17 @@ from core.lifecycle import lifecycle_decisions
 from core.observation import Batch
 from core.occupancy_evidence import occupancy_evidence
 from core.params import Params
-from core.rules import PAPER_RULES, UpdateRules
+from core.rules import DEFAULT_RULES, UpdateRules
 from core.state import SceneState
 from core.support import support_parents
 from core.visibility import batch_visibility
 
 
 def decide(
-    state: SceneState, batch: Batch, params: Params | None = None, rules: UpdateRules = PAPER_RULES
+    state: SceneState,
+    batch: Batch,
+    params: Params | None = None,
+    rules: UpdateRules = DEFAULT_RULES,
 ) -> list[Event]:
     """Events of one batch; pure and deterministic. `params` defaults to the scene's own."""
     params = params or state.params

@@ -219,9 +219,11 @@ def _observe(
     """State fusion of a positive batch: evidence, latest center, recent centers, appearance."""
     observations = event.observations
     weight = params.fusion.observation_evidence_weight
+    from_scores = params.fusion.class_evidence_from_scores
     class_evidence = dict(track.class_evidence)
     for observation in observations:
-        for label, share in class_distribution(observation.label, observation.class_scores).items():
+        evidence = class_distribution(observation.label, observation.class_scores, from_scores)
+        for label, share in evidence.items():
             class_evidence[label] = class_evidence.get(label, 0.0) + weight * share
     centers = track.recent_centers + tuple(o.center for o in observations)
     last = observations[-1]

@@ -213,7 +213,7 @@ def corroborates(track: Track, proposals: Sequence[Proposal], params: Params) ->
     Yes at its place (a center inside the stored box grown by the tolerance) or by appearance
     (both embeddings, cosine past the gate). A re-acquired track restarts as a hypothesis anyway.
     """
-    if track.lifecycle == "removed":
+    if track.lifecycle == "removed" or not params.lifecycle.corroborate_at_place:
         return True
     embedding = track.embedding()
     grow = params.lifecycle.place_tolerance_m

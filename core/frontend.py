@@ -61,7 +61,7 @@ class TrackColumns:
     while the front end runs, with their latest centers. Class beliefs and appearance are
     fetched lazily, once per track."""
 
-    def __init__(self, state: SceneState, first_number: int) -> None:
+    def __init__(self, state: SceneState, first_number: int, from_scores: bool = True) -> None:
         arrays = state.arrays
         self.state = state
         self.count = len(arrays.track_ids)  # rows of the state; later rows are new
@@ -70,6 +70,7 @@ class TrackColumns:
         self.centers = arrays.centers.copy()
         self.row = {track_id: row for row, track_id in enumerate(self.ids)}
         self.first_number = first_number
+        self.from_scores = from_scores  # fusion.class_evidence_from_scores of the batch's params
         self.new_ids: list[str] = []
         self.observations: dict[str, list[Proposal]] = {}
         self._embeddings: dict[int, FloatArray | None] = {}
@@ -109,7 +110,9 @@ class TrackColumns:
                 self._beliefs[row] = track.class_probabilities()
             else:
                 first = self.observations[self.ids[row]][0]
-                self._beliefs[row] = class_distribution(first.label, first.class_scores)
+                self._beliefs[row] = class_distribution(
+                    first.label, first.class_scores, self.from_scores
+                )
         return self._beliefs[row]
 
     def extent_of(self, track_id: str) -> FloatArray:
@@ -177,8 +180,8 @@ def associate_capture(
     state: SceneState, proposals: Sequence[Proposal], params: Params
 ) -> list[tuple[int, str]]:
     """The front end on an inspection capture's view: (proposal index, track) of each child."""
-    columns = TrackColumns(state, state.next_track_number)
-    recoverable = state.arrays.published & _absent(state.arrays, frozenset(), columns, params)
+    columns = TrackColumns(state, state.next_track_number, params.fusion.class_evidence_from_scores)
+    recoverable = _recoverable(state.arrays, frozenset(), columns, params)
     return associate_frame(columns, proposals, recoverable, None, params.association, False)
 
 
@@ -198,10 +201,12 @@ def associate_batch(
     arrays = state.arrays
     first = state.next_track_number
     new_fixtures = tuple(f"trk-{first + i:06d}" for i in range(len(fixtures.unexplained)))
-    columns = TrackColumns(state, first + len(new_fixtures))
+    columns = TrackColumns(
+        state, first + len(new_fixtures), params.fusion.class_evidence_from_scores
+    )
     eligible = _eligible(arrays, since, rules.identity_memory_s)
     for frame_proposals, shown in zip(proposals, visibility.shown, strict=True):
-        recoverable = arrays.published & _absent(arrays, shown, columns, params)
+        recoverable = _recoverable(arrays, shown, columns, params)
         associate_frame(columns, frame_proposals, recoverable, eligible, params.association, True)
     absent = _absent(arrays, visibility.shown[-1], columns, params)
     new_tracks = (*new_fixtures, *columns.new_ids)
@@ -230,6 +235,18 @@ def _eligible(arrays: TrackArrays, since: float, memory: float | None) -> BoolAr
         recent = arrays.last_observed >= since - memory  # NaN (never seen): False
     eligible: BoolArray = ~arrays.gone & recent
     return eligible
+
+
+def _recoverable(
+    arrays: TrackArrays, shown: Collection[str], columns: TrackColumns, params: Params
+) -> BoolArray:
+    """The tracks the unique-class fallback may lend an identity from: ours, published ones
+    whose absence is established; the paper's (`fallback_requires_absence` False), any track
+    (the frame's matches are excluded when it runs)."""
+    if not params.association.fallback_requires_absence:
+        return np.ones(len(arrays.track_ids), dtype=np.bool_)
+    recoverable: BoolArray = arrays.published & _absent(arrays, shown, columns, params)
+    return recoverable
 
 
 def _absent(

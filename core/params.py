@@ -80,6 +80,9 @@ class AssociationParams:
     # 0.2: a track seen as a mug agrees with a detection that scores cup 0.9 and mug 0.75 (0.45),
     # not with one that never names a mug.
     min_class_compatibility: Fraction = 0.2
+    # The soft reading above is ours (switch `soft_class_agreement`); False is the paper's
+    # "class agreement": the detection's label is the track's most likely class.
+    soft_class_agreement: bool = True
     # Unique-class fallback: recover an identity after large motion when appearance agrees.
     unique_class_fallback: bool = True
     # Among several missing tracks of a class, appearance must prefer one by this much: two
@@ -88,6 +91,14 @@ class AssociationParams:
     # Only a track whose absence is established lends its identity: removed or demoted, or its
     # place seen empty in this many batches (one miss may be the detector's, not the object's).
     fallback_min_misses: Annotated[int, Field(ge=1, le=1000)] = 2
+    # Not in the paper: the two sentences above (lend only a published identity whose absence
+    # is established). False is the paper's fallback, which lends the identity of any track of
+    # the class that this frame did not match.
+    fallback_requires_absence: bool = True
+    # Not in the paper: among several candidates of the class, appearance picks one (past the
+    # gate, by `fallback_margin`). False is the paper's "unique-class" fallback: one candidate
+    # of the class and one unmatched proposal of it, appearance not conflicting.
+    fallback_ranks_by_appearance: bool = True
     # The fallback, deferred (not in the paper, whose fallback lends an identity at once): a
     # carried object seen at its new place before its old place was seen empty starts a
     # hypothesis. Once its absence is established as above, a never-published hypothesis seen
@@ -216,6 +227,11 @@ class FusionParams:
     # (partial views give partial boxes); past this size on an axis the union is dropped for
     # the latest box, as no object we track is larger and drift must not inflate it.
     max_box_m: Annotated[float, Field(gt=0.0, le=10.0)] = 1.0
+    # Not in the paper: an observation's unit class evidence is spread over the classes the
+    # detector scored (its scores clipped at 0 and normalized), so a label flickering between
+    # confusable classes (cup/mug) builds one class belief. False is the paper's: the unit
+    # evidence goes to the detection's label.
+    class_evidence_from_scores: bool = True
 
 
 @dataclass(frozen=True)
@@ -239,6 +255,9 @@ class LifecycleParams:
     # A same-label false positive elsewhere inside the 0.8 m gate then cannot keep a vanished
     # object alive; a moved object is corroborated from its second sighting at the new place.
     place_tolerance_m: Metres = 0.10
+    # The rule above, as a switch: False is the paper's, where every matched batch is an
+    # ordinary positive observation (eta_o), wherever in the gate the match lay.
+    corroborate_at_place: bool = True
 
 
 SizeLimits = tuple[Metres, Metres, Metres, Metres, Metres, Metres]  # min dx, dy, dz, max dx, dy, dz
@@ -333,6 +352,10 @@ class FixtureParams:
     # and its center is inside the fixture footprint grown by the margin.
     support_height_tolerance_m: Metres = 0.08
     support_footprint_margin_m: Metres = 0.05
+    # Not in the paper: among fixtures an object rests on, a published one wins over a fixture
+    # hypothesis (an `on` edge names a node of the graph), then the closest top. False: the
+    # closest top alone (the paper's "geometrically assigned parent").
+    published_parent_first: bool = True
 
     def __post_init__(self) -> None:
         if len(set(self.taxonomy)) != len(self.taxonomy):

@@ -1,4 +1,4 @@
-"""Update rules: what decide() does with the evidence. The defaults are PBD-AG's (section 3.3).
+"""Update rules: what decide() does with the evidence. The defaults are the paper's (section 3.3).
 
 Baselines and ablations are other instances of this one object handed to the same loop
 (never `if ablation == ...` in the core). Rules that are plain numbers (confirmation batches,
@@ -29,4 +29,7 @@ class UpdateRules:
     miss_evidence: Literal["visible", "free_space"] = "visible"
 
 
-PAPER_RULES = UpdateRules()
+DEFAULT_RULES = UpdateRules()
+"""Every mechanism of section 3.3 on, as the paper writes it. Both profiles of
+`core.profiles` run these rules; what we added beside the paper are parameters of
+`core.params`, each with a value that restores the paper's rule."""

@@ -51,7 +51,7 @@ def support_of(
         if not (box[0] <= center[0] <= box[2] and box[1] <= center[1] <= box[3]):
             continue
         gap = abs(bottom_z - surface.top_z)
-        rank = (not surface.published, gap, surface.track_id)
+        rank = (params.published_parent_first and not surface.published, gap, surface.track_id)
         if gap <= params.support_height_tolerance_m and (best is None or rank < best):
             best = rank
     return None if best is None else best[2]
