@@ -3,6 +3,13 @@
 phi_i holds six terms, each increasing from 0 (certain) to 1, in the paper's order:
 existence, class, parent, position, age, confirmation. The transforms are documented with their
 constants in core/params.py (UncertaintyParams).
+
+The existence term reads the fixture's evidence, not its clamped log-odds: the clamp
+(`ExistenceParams.logodds_max`, 1.5) exists so that misses can remove a long-seen object, and
+it pins every confirmed fixture at p = 0.82, which would make 4 p (1 - p) the constant .597.
+The evidence is equation (3) summed over the fixture's counters without the clamp
+(`evidence_logodds`). A fixture's parent term is 0 as long as it has no parent evidence (the
+frontend gives fixtures none), so its weight (.10) is spent on a constant for fixtures.
 """
 
 from __future__ import annotations
@@ -14,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.params import Params
-from core.state import Track
+from core.state import Track, logistic
 
 TERMS = ("existence", "class", "parent", "position", "age", "confirmation")
 
@@ -38,6 +45,22 @@ def normalized_entropy(probabilities: Iterable[float], classes: int) -> float:
 def existence_term(p_exist: float) -> float:
     """Existence ambiguity 4 p (1 - p): 0 at p = 0 or 1, 1 at p = 0.5."""
     return 4.0 * p_exist * (1.0 - p_exist)
+
+
+def evidence_logodds(fixture: Track, params: Params) -> float:
+    """Equation (3) over the fixture's counted evidence, unclamped: the prior, eta_o per
+    supporting batch, eta_c for a confirming verdict (eta_r off for a rejection), eta_m per
+    visibility-admissible miss since its last positive batch (the counter restarts there).
+    Never below the state's log-odds: a fixture loaded from a baseline carries its log-odds and
+    no batches."""
+    e = params.existence
+    logodds = e.prior_logodds + e.eta_observed * fixture.batches_observed
+    logodds -= e.eta_missed * fixture.visible_misses
+    if fixture.verification == "confirmed":
+        logodds += e.eta_confirmed
+    elif fixture.verification == "rejected":
+        logodds -= e.eta_rejected
+    return max(logodds, fixture.existence_logodds)
 
 
 def class_term(fixture: Track, params: Params) -> float:
@@ -86,9 +109,9 @@ def confirmation_term(fixture: Track, params: Params) -> float:
 
 
 def fixture_uncertainty(fixture: Track, clock: float | None, params: Params) -> Uncertainty:
-    """u_i of equation (4) with its terms."""
+    """u_i of equation (4) with its terms (existence from the unclamped evidence)."""
     values = (
-        existence_term(fixture.p_exist),
+        existence_term(logistic(evidence_logodds(fixture, params))),
         class_term(fixture, params),
         parent_term(fixture),
         position_term(fixture, params),
