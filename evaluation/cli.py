@@ -23,7 +23,7 @@ SHIPPED = [
     "kitchen-real.yaml",
     "busy-living-room.yaml",
 ]
-DEFAULT_SCENARIOS = {"dynamic": SHIPPED, "fixtures": SHIPPED}
+DEFAULT_SCENARIOS = {"dynamic": SHIPPED, "fixtures": SHIPPED, "ablation": SHIPPED}
 ACTIVE_SHIPPED = ["active/flat.yaml", "active/suite.yaml", "active/floor.yaml"]
 # The `eval` extra of pyproject.toml: the module each of its distributions installs.
 EVAL_EXTRA = {
@@ -75,6 +75,11 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
         (
             "fixtures",
             "coarse fixtures under shared evidence: precision, recall, F1, center error, count MAE (Table 1)",
+        ),
+        (
+            "ablation",
+            "the dynamic protocol over the leave-one-out of every extension (core/profiles.py) "
+            "and the two readings of the visibility-gate ablation",
         ),
     ):
         add_passive_options(protocols.add_parser(protocol, help=help_text), protocol)
@@ -367,17 +372,27 @@ def run(args: argparse.Namespace) -> int:
     """Run a protocol and write its report."""
     # Imported here so that `pbdag serve` never loads the simulator (open3d) just to build its CLI.
 
-    from evaluation.methods import DYNAMIC_METHODS, FIXTURE_METHODS, method_named, with_params
+    from evaluation.methods import (
+        ABLATION_METHODS,
+        DYNAMIC_METHODS,
+        FIXTURE_METHODS,
+        method_named,
+        with_params,
+    )
     from evaluation.protocols import run_protocol
     from evaluation.report import write_report
     from evaluation.tables import console_summary
     from evaluation.world_intervals import interval_table
 
-    protocol = args.protocol
-    scenarios = world_paths(args, DEFAULT_SCENARIOS[protocol])
+    scenarios = world_paths(args, DEFAULT_SCENARIOS[args.protocol])
     if scenarios is None:
         return 2
-    catalogue = DYNAMIC_METHODS if protocol == "dynamic" else FIXTURE_METHODS
+    catalogue = {
+        "dynamic": DYNAMIC_METHODS,
+        "fixtures": FIXTURE_METHODS,
+        "ablation": ABLATION_METHODS,
+    }[args.protocol]
+    protocol = "fixtures" if args.protocol == "fixtures" else "dynamic"  # the metrics
     methods = (
         [method_named(name, catalogue) for name in args.methods]
         if args.methods

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from core.params import FixtureParams, deep_merge
+from core.profiles import EXTENDED, EXTENSIONS, PAPER, extension_named
 from core.rules import UpdateRules
 from evaluation.conceptgraphs import ConceptGraphsHooks
 from evaluation.hooks import RunnerHooks
@@ -33,6 +34,10 @@ UNVERIFIED_FIXTURES = {
     "residual_containment": 1.0,
     "absorb_contained_tracks": False,
 }
+
+
+OURS = EXTENDED.label  # the service's default profile: the paper plus our extensions
+PAPERS = PAPER.label  # every rule as the paper writes it
 
 
 class MethodUnavailable(Refused, RuntimeError):
@@ -79,9 +84,15 @@ class Method:
 
 DYNAMIC_METHODS: tuple[Method, ...] = (
     Method(
-        "PBD-AG",
-        "The paper's method: cross-batch confirmation, visibility-gated existence log-odds and "
-        "persistent identities that survive removal. Every component is on.",
+        OURS,
+        "The service's default profile: the paper's cross-batch confirmation, visibility-gated "
+        "existence log-odds and persistent identities, plus every extension of core/profiles.py.",
+    ),
+    Method(
+        PAPERS,
+        "The paper's method as it writes it (core/profiles.py `paper`): every extension off, "
+        "the log-odds unclamped, the fallback lending any identity of a unique class.",
+        params=dict(PAPER.overrides),
     ),
     Method(
         "DynaMem-inspired",
@@ -153,9 +164,16 @@ DYNAMIC_METHODS: tuple[Method, ...] = (
 
 FIXTURE_METHODS: tuple[Method, ...] = (
     Method(
-        "PBD-AG",
+        OURS,
         "Voxel class evidence with a margin test, DBSCAN, size limits, footprint association with "
-        "residual absorption, and promotion after several batches with the consensus gate.",
+        "residual absorption, and promotion after several batches with the consensus gate; with "
+        "our merges of a second track inside a fixture and of two classes in one place.",
+    ),
+    Method(
+        PAPERS,
+        "The same without our extensions (core/profiles.py `paper`): strictly same-class "
+        "association, no merge of a second track, the closest top as support parent.",
+        params=dict(PAPER.overrides),
     ),
     Method(
         "DynaMem-adapted",
@@ -187,8 +205,49 @@ FIXTURE_METHODS: tuple[Method, ...] = (
 )
 
 
+def _gate_methods() -> tuple[Method, ...]:
+    """The visibility gate ablated twice: the paper's gate against none, and each condition we
+    added against the paper's gate alone."""
+    added = [
+        Method(
+            f"{PAPERS} + {name}",
+            f"The paper's profile with one condition of ours added to its gate: "
+            f"{extension_named(name).title}.",
+            params=PAPER.plus(extension_named(name)),
+        )
+        for name in ("empty_place", "missed_detection")
+    ]
+    return (
+        Method(
+            f"{PAPERS} w/o visibility gate",
+            "The paper's profile where every unmatched track inside the image and the range "
+            "takes a miss: the paper's gate against none.",
+            params=dict(PAPER.overrides),
+            rule_flags={"visibility_gate": False},
+        ),
+        *added,
+    )
+
+
+ABLATION_METHODS: tuple[Method, ...] = (
+    DYNAMIC_METHODS[0],
+    *(
+        Method(
+            f"{OURS} - {extension.name}",
+            f"Leave one out: the extended profile without {extension.title} (it exists for "
+            f"{extension.case}).",
+            params=EXTENDED.without(extension),
+        )
+        for extension in EXTENSIONS
+    ),
+    DYNAMIC_METHODS[1],
+    *_gate_methods(),
+)
+"""The leave-one-out table of every extension, and the two readings of the gate ablation."""
+
+
 def method_named(
-    name: str, methods: tuple[Method, ...] = DYNAMIC_METHODS + FIXTURE_METHODS
+    name: str, methods: tuple[Method, ...] = DYNAMIC_METHODS + FIXTURE_METHODS + ABLATION_METHODS
 ) -> Method:
     """Look a method up by its name (case-insensitive)."""
     for method in methods:

@@ -24,7 +24,7 @@ from evaluation.change_metrics import (
     lenient_event_recall,
 )
 from evaluation.evaluate import MethodRun, WireBatch, run_in_process, run_via_service
-from evaluation.methods import Method
+from evaluation.methods import OURS, Method
 from evaluation.metrics import fixture_scores, global_assignment, identity_metrics, presence_f1
 from evaluation.predictions import FramePrediction
 from pbdag_client import Client
@@ -77,7 +77,7 @@ def acquired_truth(run: SimRun) -> list[FrameTruth]:
 
 def run_method(stream: Stream, method: Method, via_service: Client | None, bar: tqdm) -> MethodRun:
     """One method on one stream, advancing the progress bar per batch."""
-    if via_service is not None and method.name == "PBD-AG":
+    if via_service is not None and method.name == OURS:
         return run_via_service(method, stream.batches, via_service, on_batch=lambda: bar.update(1))
     return run_in_process(method, stream.batches, on_batch=lambda: bar.update(1))
 

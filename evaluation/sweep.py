@@ -18,6 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from core.profiles import EXTENDED
 from evaluation.confidence import spelled
 from evaluation.methods import DYNAMIC_METHODS, method_named
 from evaluation.protocols import run_protocol
@@ -26,7 +27,7 @@ from evaluation.world_intervals import intervals
 from evaluation.worlds import GENERATED_STREAM_SEED, world_files
 
 DEFAULT_VALUES = (0.25, 0.5, 0.75, 1.0)
-DEFAULT_METHODS = ("PBD-AG", "ConceptGraphs-inspired")
+DEFAULT_METHODS = (EXTENDED.label, "ConceptGraphs-inspired")
 # The strict headlines, each with its lenient reading beside (evaluation.tables.READINGS).
 FIGURES = (
     ("idf1", "IDF1"),

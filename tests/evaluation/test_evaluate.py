@@ -31,7 +31,7 @@ def test_in_process_and_via_service_give_the_same_events_and_graphs(
     tmp_path: Path, short_stream: tuple[SimRun, list[WireBatch]]
 ) -> None:
     _run, batches = short_stream
-    pbdag = method_named("PBD-AG")
+    pbdag = method_named("PBD-AG (extended)")
     local = run_in_process(pbdag, batches)
     container = build_container(Settings(data_dir=tmp_path, allow_anonymous_local=True))
     with local_pbdag_client(create_app(container, run_worker=True)) as client:

@@ -57,13 +57,13 @@ def test_the_interval_table_has_one_row_per_method_and_every_figure() -> None:
     rows = [
         world_row(f"gen-{k}", method, idf1, recalled)
         for k, (idf1, recalled) in enumerate([(0.9, 4), (0.8, 3), (0.7, 2)])
-        for method in ("PBD-AG", "B")
+        for method in ("PBD-AG (extended)", "B")
     ]
     table = intervals("dynamic", rows)
-    assert set(table) == {"PBD-AG", "B"}
+    assert set(table) == {"PBD-AG (extended)", "B"}
     # The strict headline and the lenient reading beside it: events 6/12 and 9/12, switches
     # 3 (class-agnostic) and 1 (class-aware) per world, false absence 1/10 and 0/10.
-    figures = table["PBD-AG"]
+    figures = table["PBD-AG (extended)"]
     assert figures["event_recall_identity"].value == pytest.approx(6 / 12)
     assert figures["event_recall"].value == pytest.approx(9 / 12)
     assert (figures["id_switches_any_class"].value, figures["id_switches"].value) == (3.0, 1.0)
@@ -71,7 +71,7 @@ def test_the_interval_table_has_one_row_per_method_and_every_figure() -> None:
     assert figures["false_absence"].value == 0.0
     text = interval_table("dynamic", rows)
     assert "Over 3 worlds" in text
-    assert "| PBD-AG | .800 [" in text
+    assert "| PBD-AG (extended) | .800 [" in text
     assert (
         "| IDS↓ (per world) | IDS class-aware (lenient)↓ | Event R.↑ | Event R. lenient↑ |" in text
     )
@@ -79,15 +79,15 @@ def test_the_interval_table_has_one_row_per_method_and_every_figure() -> None:
 
 
 def test_runs_written_before_the_strict_readings_show_a_dash_and_name_the_missing_keys() -> None:
-    old = [world_row(f"gen-{k}", "PBD-AG", 0.8, 3) for k in range(2)]
+    old = [world_row(f"gen-{k}", "PBD-AG (extended)", 0.8, 3) for k in range(2)]
     for row in old:
         del row["events_recalled_identity"], row["id_switches_any_class"]
     table = intervals("dynamic", old)
-    assert "event_recall_identity" not in table["PBD-AG"]
-    assert "id_switches_any_class" not in table["PBD-AG"]
-    assert table["PBD-AG"]["event_recall"].value == pytest.approx(6 / 8)
+    assert "event_recall_identity" not in table["PBD-AG (extended)"]
+    assert "id_switches_any_class" not in table["PBD-AG (extended)"]
+    assert table["PBD-AG (extended)"]["event_recall"].value == pytest.approx(6 / 8)
     text = interval_table("dynamic", old)
-    line = next(line for line in text.splitlines() if line.startswith("| PBD-AG"))
+    line = next(line for line in text.splitlines() if line.startswith("| PBD-AG (extended)"))
     cells = [cell.strip() for cell in line.strip("|").split("|")]
     assert cells[3] == "-" and cells[5] == "-"  # IDS and Event R., the strict headlines
     assert cells[4].startswith("1.000") and cells[6].startswith(".750")
@@ -102,7 +102,12 @@ def generated_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("generated")
     common = ["eval", "fixtures", "--generated", "2", "--split", "test", "--frames", "16"]
     common += ["--scenario-overrides", json.dumps(OVERRIDES)]
-    assert main([*common, "--methods", "PBD-AG", "--quiet", "--jobs", "2", "--out", str(out)]) == 0
+    assert (
+        main(
+            [*common, "--methods", "PBD-AG (extended)", "--quiet", "--jobs", "2", "--out", str(out)]
+        )
+        == 0
+    )
     return out
 
 
@@ -115,7 +120,7 @@ def test_eval_on_generated_test_worlds_writes_their_files_and_intervals(
     files = sorted((generated_run / "worlds").glob("*.yaml"))
     assert len(files) == 2
     assert {load_scenario(path).name for path in files} == {r["scenario"] for r in results["runs"]}
-    f1 = results["intervals"]["PBD-AG"]["f1"]
+    f1 = results["intervals"]["PBD-AG (extended)"]["f1"]
     assert f1["worlds"] == 2 and f1["low"] <= f1["value"] <= f1["high"]
     assert "Generated worlds: the test split, 2 worlds." in (generated_run / "table.md").read_text()
 
@@ -146,7 +151,7 @@ def test_a_bad_scenario_override_is_refused_before_anything_runs(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     common = ["eval", "fixtures", "--generated", "1", "--frames", "8", "--quiet"]
-    common += ["--methods", "PBD-AG", "--out", str(tmp_path)]
+    common += ["--methods", "PBD-AG (extended)", "--out", str(tmp_path)]
     bad = '{"detector": {"appearance": {"distinctiveness": 7}}}'
     assert main([*common, "--scenario-overrides", bad]) == 2
     assert "detector.appearance.distinctiveness" in capsys.readouterr().err

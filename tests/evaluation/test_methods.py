@@ -103,8 +103,8 @@ def test_a_method_needing_a_rule_the_core_lacks_is_unavailable_not_replaced() ->
     gated = Method("Gate off", "an ablation", rule_flags={"visibility_gate": False})
     assert gated.unavailable_reason() is None
     assert gated.rules == UpdateRules(visibility_gate=False)
-    assert method_named("pbd-ag").rules == UpdateRules()
-    assert not method_named("PBD-AG").changes_the_loop and gated.changes_the_loop
+    assert method_named("pbd-ag (extended)").rules == UpdateRules()
+    assert not method_named("PBD-AG (extended)").changes_the_loop and gated.changes_the_loop
 
 
 def leaves(
@@ -139,7 +139,12 @@ def test_dynamem_asks_the_core_for_free_space_misses() -> None:
     dynamem = method_named("DynaMem-inspired")
     assert dynamem.rule_flags["miss_evidence"] == "free_space"
     names = [method.name for method in DYNAMIC_METHODS]
-    assert names[:4] == ["PBD-AG", "DynaMem-inspired", "ConceptGraphs-inspired", "Last observation"]
+    assert names[:4] == [
+        "PBD-AG (extended)",
+        "PBD-AG (paper)",
+        "DynaMem-inspired",
+        "ConceptGraphs-inspired",
+    ]
 
 
 def test_one_parameter_set_for_every_method_with_each_methods_own_settings_on_top() -> None:
@@ -148,7 +153,7 @@ def test_one_parameter_set_for_every_method_with_each_methods_own_settings_on_to
         "lifecycle": {"confirm_min_batches": 3, "remove_min_visible_misses": 4},
     }
     methods = {m.name: m for m in with_params(DYNAMIC_METHODS, overrides)}
-    ours = Params.from_dict(methods["PBD-AG"].params)
+    ours = Params.from_dict(methods["PBD-AG (extended)"].params)
     assert ours.visibility.min_expected_image_fraction == 0.002
     assert ours.lifecycle.confirm_min_batches == 3
     dynamem = Params.from_dict(methods["DynaMem-inspired"].params)
@@ -157,4 +162,4 @@ def test_one_parameter_set_for_every_method_with_each_methods_own_settings_on_to
     assert dynamem.lifecycle.confirm_min_batches == 1
     assert dynamem.lifecycle.remove_min_visible_misses == 1
     # The catalogue itself is untouched.
-    assert method_named("PBD-AG").params == {}
+    assert method_named("PBD-AG (extended)").params == {}

@@ -15,7 +15,7 @@ def fixture_run(scenario: str, f1: float) -> dict[str, Any]:
     return {
         "scenario": scenario,
         "seed": 7,
-        "method": "PBD-AG",
+        "method": "PBD-AG (extended)",
         "precision": 1.0,
         "recall": f1,
         "f1": f1,
@@ -30,7 +30,7 @@ def dynamic_run(scenario: str, strict: bool) -> dict[str, Any]:
     row = {
         "scenario": scenario,
         "seed": 7,
-        "method": "PBD-AG",
+        "method": "PBD-AG (extended)",
         "idf1": 0.8,
         "id_presence_f1": 0.8,
         "id_switches": 0,
@@ -67,7 +67,7 @@ def test_publish_writes_test_and_development_tables_between_the_markers(tmp_path
     assert text.startswith("# Title\n\nbefore\n") and text.endswith(f"{END}\nafter\n")
     assert "old figures" not in text
     assert "**Test split** (3 generated test-split worlds, stream seed 7, code abc)" in text
-    assert "| PBD-AG | 1.000 [1.000, 1.000] | .800 [" in text
+    assert "| PBD-AG (extended) | 1.000 [1.000, 1.000] | .800 [" in text
     assert "**Development** (1 shipped worlds" in text
     assert "Test split: not run yet." in text  # the dynamic and active runs are absent
     assert "- PBD-AG: .951 / .802 / .868 / .320 / .356" in text
@@ -103,7 +103,7 @@ def test_publish_reads_the_strict_headlines_and_names_what_an_older_run_lacks(
     # Test split: IDS 2 (class-agnostic) before the class-aware 0, Event R. 1/4 before the
     # lenient 4/4, False abs. identity-conditioned .100 before the agnostic .000.
     assert (
-        "| PBD-AG | .800 [.800, .800] | .800 [.800, .800] | 2.000 [2.000, 2.000] "
+        "| PBD-AG (extended) | .800 [.800, .800] | .800 [.800, .800] | 2.000 [2.000, 2.000] "
         "| .000 [.000, .000] | .250 [.250, .250] | 1.000 [1.000, 1.000] | .100 [.100, .100] "
         "| .000 [.000, .000] |" in test_part
     )

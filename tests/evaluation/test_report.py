@@ -111,8 +111,8 @@ def test_the_headline_is_the_hotel_suite_alone_and_shortfalls_carry_their_trace(
     tmp_path: Path,
 ) -> None:
     rows = [
-        run("PBD-AG", 0.9, 3, 2, 10, scenario="hotel-suite"),
-        run("PBD-AG", 0.5, 1, 0, 10, scenario="office", latencies=(None, None, 0, 0),
+        run("PBD-AG (extended)", 0.9, 3, 2, 10, scenario="hotel-suite"),
+        run("PBD-AG (extended)", 0.5, 1, 0, 10, scenario="office", latencies=(None, None, 0, 0),
             lenient_latencies=(4, None, 0, 0)),
         {"scenario": "hotel-suite", "seed": 7, "method": "X", "unavailable": "no rule yet",
          "scenario_file": "h.yaml", "scenario_sha256": "0" * 64},
@@ -120,11 +120,11 @@ def test_the_headline_is_the_hotel_suite_alone_and_shortfalls_carry_their_trace(
     write_report("dynamic", rows, tmp_path, [7])
     text = (tmp_path / "table.md").read_text()
     headline = text.split("## Table 2: hotel-suite alone, as the paper")[1].split("## Pooled")[0]
-    assert "| PBD-AG | .900±.000 |" in headline and "| 2/4 | 3/4 |" in headline
+    assert "| PBD-AG (extended) | .900±.000 |" in headline and "| 2/4 | 3/4 |" in headline
     pooled_table = text.split("## Pooled over every scenario")[1].split("## Event latency")[0]
-    assert "| PBD-AG | .700±.283 |" in pooled_table and "| 2/8 | 4/8 |" in pooled_table
+    assert "| PBD-AG (extended) | .700±.283 |" in pooled_table and "| 2/8 | 4/8 |" in pooled_table
     # Strict latencies pooled: 0, 2, 1 (hotel) and 0, 0 (office); three events never reflected.
-    assert "| PBD-AG | 0 (x3), 1, 2 | 3 |" in text
+    assert "| PBD-AG (extended) | 0 (x3), 1, 2 | 3 |" in text
     # The office's first move: missed strictly, counted leniently (after 4 batches); its second
     # missed by both.
     assert (
@@ -135,7 +135,7 @@ def test_the_headline_is_the_hotel_suite_alone_and_shortfalls_carry_their_trace(
     assert "never reflected (the lenient reading does not count it either)" in text
     assert "track from then on: 12:miss" in text
     assert (
-        "hotel-suite seed 7: mug was present, acquired, and its PBD-AG track not published at 4 "
+        "hotel-suite seed 7: mug was present, acquired, and its PBD-AG (extended) track not published at 4 "
         "checkpoints" in text
     )
     assert "- X: not run (no rule yet)." in text
@@ -147,11 +147,11 @@ def test_eval_runs_every_method_on_one_given_parameter_set_and_records_it(
     common = ["eval", "dynamic", "--seeds", "7", "--frames", "20", "--quiet"]
     common += ["--scenario", str(SCENARIOS_DIR / "hotel-suite.yaml"), "--out", str(tmp_path)]
     bad = '{"visibility": {"min_expected_image_fraction": 2}}'
-    assert main([*common, "--methods", "PBD-AG", "--params", bad]) == 2
+    assert main([*common, "--methods", "PBD-AG (extended)", "--params", bad]) == 2
     assert "params.visibility.min_expected_image_fraction" in capsys.readouterr().err
     assert not (tmp_path / "results.json").exists()
     good = {"visibility": {"min_expected_image_fraction": 0.002}}
-    assert main([*common, "--methods", "PBD-AG", "--params", json.dumps(good)]) == 0
+    assert main([*common, "--methods", "PBD-AG (extended)", "--params", json.dumps(good)]) == 0
     assert json.loads((tmp_path / "results.json").read_text())["params"] == good
     assert '"min_expected_image_fraction": 0.002' in (tmp_path / "table.md").read_text()
 
