@@ -16,11 +16,21 @@ It drives along a shortest path over the simulator's true free space (the room, 
 fixtures, inflated by the robot's radius: the paper's navigation proxy), while the planner sees
 only the map A_t built from what the robot posted. On the way it posts one semantic keyframe
 (one-frame batch) every `keyframe_spacing_m` of travel, seen by the far-range detector
-(`detector.far_range_input_scale`), within the coarse-discovery budget of 600 keyframes.
+(`detector.far_range_input_scale`), within the coarse-discovery budget of 600 keyframes. A
+keyframe carries the fixture segmenter's masks only: in the paper's pipeline fine objects come
+from fixture-centered captures alone (`keyframe_objects` puts the object detector's output on
+keyframes too; the detector runs either way, so both settings see the same random stream).
+
+Section 3.4's VLM steps are a simulated verifier (`sim.verifier`, `verifier_error_rate`):
+before each plan it answers every fixture in the memory's verification queue (a confirmed one
+gets eta_c, is published, enters Q_t and is inspected like any other), and at each capture it
+verifies the target fixture's class (`fixture_verified`: a rejection is a failed capture,
+retried from another view).
 
 The memory is either the core in process (`InProcessMemory`: decide/fold for batches, the
-planner's `decide_plan` and `decide_inspection`, exactly the functions the service's routes
-call) or the service over HTTP (`ServiceMemory`: POST batches, POST /plan, POST /inspections).
+planner's `decide_plan`, `decide_inspection` and `decide_verdict`, exactly the functions the
+service's routes call) or the service over HTTP (`ServiceMemory`: POST batches, POST /plan,
+POST /inspections, GET /verifications and POST /tracks/{id}/verification).
 """
 
 from __future__ import annotations
@@ -31,7 +41,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -48,10 +58,12 @@ from sim.memories import (
     Memory,
     Node,
     PlanStep,
+    Ranked,
     Recorded,
     Refusal,
     ServiceMemory,
     TrackSummary,
+    VerdictOutcome,
 )
 from sim.render import add_kinect_noise, render
 from sim.scenario import load_scenario
@@ -59,6 +71,7 @@ from sim.scenario_spec import Scenario
 from sim.stream import run_rng
 from sim.timeline import Timeline
 from sim.truth import TruthFixture
+from sim.verifier import SOURCE, SimulatedVerifier
 from sim.wire import make_batch, make_frame
 
 FloatArray = npt.NDArray[np.float64]
@@ -80,6 +93,29 @@ class RolloutSettings:
     grid_m: float = 0.10  # the true free-space grid the robot drives on
     max_decisions: int = 400  # a bound on plans asked (a rollout that loops stops here)
     max_visits_per_goal: int = 3  # an explore goal reached this often is recorded as stuck
+    # Keyframes carry the object detector's output too (off: the paper's pipeline, where fine
+    # objects come from fixture-centered captures only).
+    keyframe_objects: bool = False
+    # The simulated VLM answers coarse-stage and parent verification (off: neither is asked,
+    # a fixture waiting for a verdict stays unpublished and captures carry no verification).
+    verifier: bool = True
+    # The chance each answer is wrong. 0 by default: the paper gives no rate for its VLM, so
+    # the protocol's default measures the memory's mechanics with a truthful verifier; a sweep
+    # of this knob measures how much a wrong one costs.
+    verifier_error_rate: float = 0.0
+
+
+@dataclass(frozen=True)
+class VerdictRecord:
+    """One coarse-stage verdict the simulated verifier gave, and what the memory made of it."""
+
+    track_id: str
+    asked_label: str  # the track's label when asked
+    verdict: str  # confirm or reject
+    label: str  # the class the verdict names
+    truth_id: str | None  # the true fixture under the track, if any
+    wrong: bool  # the error draw flipped the answer
+    outcome: VerdictOutcome  # the track's state after it, or the memory's refusal
 
 
 @dataclass
@@ -91,6 +127,8 @@ class Capture:
     outcome: InspectionOutcome
     keyframes_before: int
     graph_after: list[Node]
+    fixture_verified: bool | None = None  # the verifier's parent verification
+    target: Ranked | None = None  # equation (5)'s terms when the plan chose the fixture
 
     @property
     def completed(self) -> bool:
@@ -111,6 +149,7 @@ class RolloutResult:
     captures: list[Capture] = field(default_factory=list)  # inspections the memory recorded
     refused: list[Capture] = field(default_factory=list)  # captures it refused (nothing recorded)
     decisions: list[dict[str, Any]] = field(default_factory=list)
+    verdicts: list[VerdictRecord] = field(default_factory=list)
     plan_ms: list[float] = field(default_factory=list)
     stop_reason: str = ""
     stuck_goals: list[tuple[float, float]] = field(default_factory=list)
@@ -166,8 +205,11 @@ class Robot:
     def keyframes_left(self) -> int:
         return self.settings.keyframe_budget - len(self.result.keyframes)
 
-    def frame(self, yaw: float, pitch: float, input_scale: float) -> dict[str, Any]:
-        """Render, detect and encode one frame at the robot's position."""
+    def frame(
+        self, yaw: float, pitch: float, input_scale: float, objects: bool = True
+    ) -> dict[str, Any]:
+        """Render, detect and encode one frame at the robot's position; without `objects`, the
+        fixture masks alone (the detector still runs, so the random stream is the same)."""
         eye = np.array([self.x, self.y, self.eye_height])
         forward = np.array(
             [math.cos(pitch) * math.cos(yaw), math.cos(pitch) * math.sin(yaw), math.sin(pitch)]
@@ -175,6 +217,8 @@ class Robot:
         pose = look_at(eye, eye + forward)
         view = render(self.world, self.camera, pose)
         detections = self.detector.detect(view, self.world, self.frames, self.rng, input_scale)
+        if not objects:
+            detections = [d for d in detections if d.kind == "fixture"]
         depth = view.depth
         if self.scenario.detector.depth_noise == "kinect":
             depth = add_kinect_noise(depth, self.rng)
@@ -189,7 +233,11 @@ class Robot:
             return
         self.yaw = yaw
         pitch = math.radians(self.settings.keyframe_pitch_deg)
-        frame = self.frame(yaw, pitch, self.scenario.detector.far_range_input_scale)
+        scale, objects = (
+            self.scenario.detector.far_range_input_scale,
+            self.settings.keyframe_objects,
+        )
+        frame = self.frame(yaw, pitch, scale, objects)
         self.memory.post_batch(make_batch(frame["frame_id"], [frame]))
         self.result.keyframes.append((self.x, self.y, self.travelled))
         self.since_keyframe = 0.0
@@ -229,6 +277,42 @@ def _wrap(angle: float) -> float:
     return math.atan2(math.sin(angle), math.cos(angle))
 
 
+def answer_verifications(
+    verifier: SimulatedVerifier | None, memory: Memory, result: RolloutResult
+) -> None:
+    """Coarse-stage verification (section 3.2): one verdict per fixture in the memory's
+    verification queue, about the frame it names to crop (its best frame)."""
+    if verifier is None:
+        return
+    for pending in memory.pending_verifications():
+        answer = verifier.coarse(pending.track_id, pending.label, pending.center)
+        verdict: Literal["confirm", "reject"] = "confirm" if answer.confirm else "reject"
+        outcome = memory.verify(pending.track_id, verdict, answer.label, SOURCE, pending.best_frame)
+        result.verdicts.append(
+            VerdictRecord(
+                pending.track_id,
+                pending.label,
+                verdict,
+                answer.label,
+                answer.truth_id,
+                answer.wrong,
+                outcome,
+            )
+        )
+
+
+def _parent_verified(
+    verifier: SimulatedVerifier | None, memory: Memory, capture_id: str, fixture_id: str
+) -> bool | None:
+    """Parent verification at the capture (section 3.4): the target's class at its place."""
+    if verifier is None:
+        return None
+    fixture = memory.track(fixture_id)
+    if fixture is None:
+        return None  # the memory no longer knows it: the capture is refused anyway
+    return verifier.parent(capture_id, fixture.label, fixture.center)
+
+
 def _inspect(
     robot: Robot,
     memory: Memory,
@@ -236,8 +320,10 @@ def _inspect(
     settings: RolloutSettings,
     visits: dict[tuple[int, int], int],
     result: RolloutResult,
+    verifier: SimulatedVerifier | None = None,
 ) -> str | None:
-    """Drive to the plan's view and sweep it as one capture; why to stop, if the budget is spent."""
+    """Drive to the plan's view, sweep it and verify the fixture, as one capture; why to stop,
+    if the budget is spent."""
     assert step.view is not None and step.fixture_id is not None
     budget = settings.inspection_budget
     if budget is not None and len(result.captures) >= budget:
@@ -247,8 +333,17 @@ def _inspect(
     frames = robot.sweep(vyaw, vpitch)
     capture_id = f"cap-{len(result.captures) + len(result.refused):03d}"
     view = ViewPose(x=vx, y=vy, yaw=_wrap(vyaw))
-    outcome = memory.inspect(capture_id, step.fixture_id, frames, view)
-    capture = Capture(step.fixture_id, step.view, outcome, len(result.keyframes), memory.graph())
+    verified = _parent_verified(verifier, memory, capture_id, step.fixture_id)
+    outcome = memory.inspect(capture_id, step.fixture_id, frames, view, verified)
+    capture = Capture(
+        step.fixture_id,
+        step.view,
+        outcome,
+        len(result.keyframes),
+        memory.graph(),
+        fixture_verified=verified,
+        target=step.target,
+    )
     (result.refused if isinstance(outcome, Refusal) else result.captures).append(capture)
     return None
 
@@ -260,6 +355,7 @@ def _explore(
     settings: RolloutSettings,
     visits: dict[tuple[int, int], int],
     result: RolloutResult,
+    verifier: SimulatedVerifier | None = None,
 ) -> str | None:
     """Drive to the frontier goal and look around; why to stop (budget spent, stuck), if so."""
     if robot.keyframes_left <= 0:
@@ -280,6 +376,32 @@ def _explore(
     facing = math.atan2(centroid[1] - robot.y, centroid[0] - robot.x)
     robot.look_around(facing)
     return None
+
+
+def _terms(entry: Ranked) -> dict[str, Any]:
+    """Equation (5)'s terms of one fixture, rounded for the trace."""
+    return {
+        "fixture_id": entry.fixture_id,
+        "score": round(entry.score, 4),
+        "uncertainty": round(entry.uncertainty, 4),
+        "proximity": round(entry.proximity, 4),
+        "terms": {name: round(value, 4) for name, value in entry.terms.items()},
+    }
+
+
+def _decision_line(step: PlanStep, robot: Robot, result: RolloutResult) -> dict[str, Any]:
+    """The trace of one plan: the decision, and the ranking of Q_t with equation (4)'s terms."""
+    return {
+        "decision": step.decision,
+        "reason": step.reason,
+        "fixture_id": step.fixture_id,
+        "goal": step.goal,
+        "deferred": list(step.deferred),
+        "keyframes": len(result.keyframes),
+        "robot": (round(robot.x, 2), round(robot.y, 2)),
+        "target": None if step.target is None else _terms(step.target),
+        "ranked": [_terms(entry) for entry in step.ranked],
+    }
 
 
 def rollout(
@@ -303,33 +425,32 @@ def rollout(
         (box.id, box.label, box.center, timeline.placements(0)[box.id].support)
         for box in world.objects
     )
-    radius = Params().planner.robot_radius_m if robot_radius_m is None else robot_radius_m
+    defaults = Params()
+    radius = defaults.planner.robot_radius_m if robot_radius_m is None else robot_radius_m
     robot = Robot(scenario, seed, memory, settings, radius, result)
+    verifier = (
+        SimulatedVerifier(
+            world.fixtures, seed, settings.verifier_error_rate, defaults.fixtures.taxonomy
+        )
+        if settings.verifier
+        else None
+    )
     visits: dict[tuple[int, int], int] = {}
     robot.look_around()
     while True:
         if len(result.decisions) >= settings.max_decisions:
             result.stop_reason = "decision bound reached"
             break
+        answer_verifications(verifier, memory, result)
         begun = time.perf_counter()
         step = memory.plan(robot.pose)
         result.plan_ms.append(1000 * (time.perf_counter() - begun))
-        result.decisions.append(
-            {
-                "decision": step.decision,
-                "reason": step.reason,
-                "fixture_id": step.fixture_id,
-                "goal": step.goal,
-                "deferred": list(step.deferred),
-                "keyframes": len(result.keyframes),
-                "robot": (round(robot.x, 2), round(robot.y, 2)),
-            }
-        )
+        result.decisions.append(_decision_line(step, robot, result))
         if step.decision == "done":
             result.stop_reason = "plan done: " + step.reason
             break
         act = _inspect if step.decision == "inspect" else _explore
-        stop = act(robot, memory, step, settings, visits, result)
+        stop = act(robot, memory, step, settings, visits, result, verifier)
         if stop is not None:
             result.stop_reason = stop
             break
