@@ -10,10 +10,16 @@ never a branch in the code:
 - `fifo`: no score, ties by track id: the order fixtures were first hypothesised (the queue
   before equation (5));
 - `random`: no score, ties by a hash of the run's seed and the track id.
+
+Each row records the rollout's settings (`sim.rollout.RolloutSettings`: whether keyframes carry
+fine detections, the simulated verifier and its error rate), every coarse-stage verdict, and
+for each inspection the parent verification and equation (4)'s six terms at the plan that chose
+the target.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import multiprocessing
 from collections.abc import Callable, Mapping, Sequence
@@ -31,8 +37,8 @@ from core.params import deep_merge
 from evaluation.metrics import fixture_scores, harmonic_f1, ratio
 from evaluation.predictions import PredictedNode
 from pbdag_client import Client
-from sim.memories import InProcessMemory, Memory, Node, ServiceMemory
-from sim.rollout import RolloutResult, RolloutSettings, rollout
+from sim.memories import InProcessMemory, Memory, Node, Ranked, ServiceMemory
+from sim.rollout import Capture, RolloutResult, RolloutSettings, rollout
 from sim.scenario import load_scenario
 
 ORDERS: dict[str, Callable[[int], dict[str, Any]]] = {
@@ -255,6 +261,22 @@ def score_graph(result: RolloutResult, graph: Sequence[Node]) -> dict[str, Any]:
     }
 
 
+def _capture_line(capture: Capture) -> dict[str, Any]:
+    """One capture for results.json: the fixture, outcome, view, parent verification, and the
+    terms of equations (4) and (5) when the plan chose it."""
+    target: Ranked | None = capture.target
+    return {
+        "fixture_id": capture.fixture_id,
+        "outcome": capture.outcome.text,
+        "view": list(capture.view),
+        "fixture_verified": capture.fixture_verified,
+        "uncertainty": None if target is None else target.uncertainty,
+        "terms": None if target is None else dict(target.terms),
+        "proximity": None if target is None else target.proximity,
+        "score": None if target is None else target.score,
+    }
+
+
 def run_row(
     path: Path,
     seed: int,
@@ -273,6 +295,7 @@ def run_row(
         if client is None
         else ServiceMemory(client, name, overrides)
     )
+    settings = settings or RolloutSettings()
     result = rollout(scenario, seed, memory, settings, order=order, via_service=client is not None)
     scores = score_graph(result, result.final_graph)
     budget_curve = [score_graph(result, c.graph_after)["fine"]["f1"] for c in result.captures]
@@ -283,16 +306,23 @@ def run_row(
         "seed": seed,
         "order": order,
         "via_service": client is not None,
+        "settings": dataclasses.asdict(settings),
         **scores,
         "fine_f1_after_inspections": budget_curve,
-        "inspections": [
-            {"fixture_id": c.fixture_id, "outcome": c.outcome.text, "view": list(c.view)}
-            for c in result.captures
-        ],
+        "inspections": [_capture_line(c) for c in result.captures],
         # Captures the memory refused (nothing recorded): no inspection, not in the budget.
-        "refused_captures": [
-            {"fixture_id": c.fixture_id, "outcome": c.outcome.text, "view": list(c.view)}
-            for c in result.refused
+        "refused_captures": [_capture_line(c) for c in result.refused],
+        "verdicts": [
+            {
+                "track_id": v.track_id,
+                "asked_label": v.asked_label,
+                "verdict": v.verdict,
+                "label": v.label,
+                "truth_id": v.truth_id,
+                "wrong": v.wrong,
+                "outcome": v.outcome.text,
+            }
+            for v in result.verdicts
         ],
         "fine_shortfalls": fine_shortfalls(result),
         "coarse_shortfalls": coarse_shortfalls(result),

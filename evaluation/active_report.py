@@ -1,5 +1,6 @@
 """The reports of the autonomous protocol (`pbdag eval active`): Table 3 beside the paper's
-rows, the paired acquisition table, PBD-AG's fine shortfalls, the figures, results.json."""
+rows, the paired acquisition table, equation (4)'s terms at PBD-AG's targets, the simulated
+verifier's answers, PBD-AG's fine shortfalls, the figures, results.json."""
 
 from __future__ import annotations
 
@@ -14,6 +15,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from core.params import Params
+from core.uncertainty import TERMS
 from evaluation.active import ORDERS
 from evaluation.confidence import mean_interval, spelled
 from evaluation.metrics import mean_std
@@ -141,6 +144,52 @@ def paired_table(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int]) -> s
     return "\n".join(lines) + "\n"
 
 
+def terms_table(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Equation (4)'s six terms at the targets PBD-AG's order chose: their range, and each
+    weight times that range (what the term can move u_i by in these rollouts; a constant term
+    moves nothing, whatever its weight)."""
+    targets = [
+        i["terms"]
+        for r in rows
+        if r["order"] == "pbdag"
+        for i in (*r["inspections"], *r["refused_captures"])
+        if i.get("terms")
+    ]
+    if not targets:
+        return "No target was chosen.\n"
+    weights = Params().uncertainty.weights
+    lines = [
+        f"{len(targets)} captures of PBD-AG's order, each at the plan that chose its target.",
+        "",
+        "| term | weight | mean | min | max | weight x (max - min) |",
+        "| --- | --- | --- | --- | --- | --- |",
+    ]
+    for name, weight in zip(TERMS, weights, strict=True):
+        values = [float(t[name]) for t in targets]
+        low, high = min(values), max(values)
+        lines.append(
+            f"| {name} | {weight:.2f} | {float(np.mean(values)):.3f} | {low:.3f} | {high:.3f} "
+            f"| {weight * (high - low):.3f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def verification_lines(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The simulated verifier's answers over PBD-AG's rollouts: coarse verdicts and parent
+    verifications, and how many of them the error rate made wrong."""
+    subject = [r for r in rows if r["order"] == "pbdag"]
+    verdicts = [v for r in subject for v in r.get("verdicts", [])]
+    parents = [i["fixture_verified"] for r in subject for i in r["inspections"]]
+    confirmed = sum(v["verdict"] == "confirm" for v in verdicts)
+    return [
+        f"- coarse-stage verdicts: {len(verdicts)} ({confirmed} confirm, "
+        f"{len(verdicts) - confirmed} reject; {sum(v['wrong'] for v in verdicts)} wrong by the "
+        "error draw)",
+        f"- parent verification at the captures: {parents.count(True)} confirmed, "
+        f"{parents.count(False)} rejected, {parents.count(None)} not asked",
+    ]
+
+
 def text(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int], header: str) -> str:
     out = ["# Autonomous construction (the paper's Table 3)", "", header, "", table3(rows)]
     out += ["## Every order, with intervals over rollouts", "", interval_table(rows, budgets)]
@@ -149,6 +198,8 @@ def text(rows: Sequence[Mapping[str, Any]], budgets: Sequence[int], header: str)
         "",
         paired_table(rows, budgets),
     ]
+    out += ["## Equation (4) at PBD-AG's targets", "", terms_table(rows)]
+    out += ["## The simulated verifier", "", *verification_lines(rows), ""]
     out += ["## PBD-AG's fine shortfalls, with their traces", ""]
     categories: dict[str, int] = {}
     for r in rows:
@@ -291,13 +342,22 @@ def write(
 ) -> list[Path]:
     """results.json, table.md and the figures; `worlds`: the generated split, when it ran on one."""
     out.mkdir(parents=True, exist_ok=True)
+    settings = rows[0].get("settings", {}) if rows else {}
     header = (
         f"PBD-AG rows: mean ± sample std over {len({(r['scenario'], r['seed']) for r in rows})} "
         f"world-seed rollouts (seeds {', '.join(map(str, seeds))}); code {code_version}; "
         "parameters: core/params.py"
         + (f" with {json.dumps(dict(params), sort_keys=True)}" if params else "")
         + ". Coarse: same-class greedy matching within 1.0 m; fine: same class, the correct "
-        "fixture parent and a distance under 0.5 m."
+        "fixture parent and a distance under 0.5 m. Rollouts: keyframes "
+        + ("with" if settings.get("keyframe_objects") else "without")
+        + " fine detections; simulated verifier "
+        + (
+            f"on, error rate {settings.get('verifier_error_rate', 0.0)}"
+            if settings.get("verifier", True)
+            else "off"
+        )
+        + "."
     )
     document = {
         "protocol": "active",
