@@ -468,7 +468,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("scenario", type=Path)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--via-service", metavar="URL")
+    parser.add_argument(
+        "--keyframe-objects", action="store_true", help="keyframes carry fine detections too"
+    )
+    parser.add_argument("--no-verifier", action="store_true", help="no simulated VLM")
+    parser.add_argument("--verifier-error-rate", type=float, default=0.0)
     arguments = parser.parse_args(argv)
+    settings = RolloutSettings(
+        keyframe_objects=arguments.keyframe_objects,
+        verifier=not arguments.no_verifier,
+        verifier_error_rate=arguments.verifier_error_rate,
+    )
     scenario = load_scenario(arguments.scenario)
     memory: Memory
     if arguments.via_service:
@@ -477,13 +487,15 @@ def main(argv: list[str] | None = None) -> None:
         memory = ServiceMemory(client, scenario.name)
     else:
         memory = InProcessMemory(scenario.name)
-    result = rollout(scenario, arguments.seed, memory, via_service=bool(arguments.via_service))
+    via_service = bool(arguments.via_service)
+    result = rollout(scenario, arguments.seed, memory, settings, via_service=via_service)
     fixtures = [n for n in result.final_graph if n.kind == "fixture"]
     objects = [n for n in result.final_graph if n.kind == "object"]
     print(
         f"{scenario.name} seed {arguments.seed}: {len(result.keyframes)} keyframes, "
         f"{len(result.captures)} inspections ({len(result.refused)} refused), path {result.path_length_m:.1f} m, "
-        f"{len(fixtures)} fixtures, {len(objects)} objects, {result.seconds:.1f} s; "
+        f"{len(fixtures)} fixtures, {len(objects)} objects, {len(result.verdicts)} verdicts, "
+        f"{result.seconds:.1f} s; "
         f"stop: {result.stop_reason}"
     )
 
