@@ -25,7 +25,8 @@ class UpdateRules:
     # Removal and demotion at all (append-only memories never resolve a disappearance).
     removal: bool = True
     # What a miss needs: the box observable and unoccluded ("visible", the paper's gate), or
-    # depth showing free space where the box was ("free_space", DynaMem's clearing rule).
+    # depth showing free space at the object's own points ("free_space", DynaMem's per-voxel
+    # clearing rule: the samples of its latest observed box, at least half of them free).
     miss_evidence: Literal["visible", "free_space"] = "visible"
 
 

@@ -84,12 +84,18 @@ def batch_visibility(
     live = ~arrays.gone & ~arrays.captured
     best: dict[str, Sighting] = {}
     shown: list[frozenset[str]] = []
+    # DynaMem's clearing rule is per voxel of the object itself: its samples are the latest
+    # observed box (the object's own points), not the union of every view, which a bleeding
+    # mask grows over the background around it.
+    per_voxel = rules.miss_evidence == "free_space"
+    centers = arrays.centers if per_voxel else arrays.box_centers
+    extents = arrays.extents if per_voxel else arrays.box_extents
     for frame in frames:
-        rows = in_view_rows(arrays.box_centers, arrays.box_extents, frame, params.visibility)
+        rows = in_view_rows(centers, extents, frame, params.visibility)
         rows = rows[live[rows]]
         sightings = samples_passed(
-            arrays.box_centers[rows],
-            arrays.box_extents[rows],
+            centers[rows],
+            extents[rows],
             frame,
             params.visibility,
             rules.visibility_gate,

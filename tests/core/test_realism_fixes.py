@@ -143,6 +143,23 @@ def test_a_box_grown_beside_the_object_does_not_make_its_place_look_empty() -> N
     assert [e.details()["evidence"] for e in gone] == ["visible_miss"]
 
 
+def test_the_free_space_rule_tests_the_object_s_own_points_not_a_grown_box() -> None:
+    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    mug = state.tracks["trk-000001"]
+    # The union box grew 0.5 m to one side and 0.4 m back (a bleeding mask): most of its
+    # samples lie in front of the wall, where the depth shows free space.
+    low = [c - e / 2 for c, e in zip(mug.center, mug.extent, strict=True)]
+    high = [c + e / 2 for c, e in zip(mug.center, mug.extent, strict=True)]
+    grown = mug.evolved(box=(low[0], low[1], low[2], high[0] + 0.5, high[1], high[2] + 0.4))
+    state = replace(state, tracks={**state.tracks, mug.track_id: grown})
+    free_space = UpdateRules(miss_evidence="free_space")
+    # DynaMem clears per voxel: the mug's own points still show its surface, so no miss.
+    still_there = scene_batch("undetected", MUG, detect=set())
+    assert track_events(decide(state, still_there, rules=free_space)) == []
+    gone = track_events(decide(state, scene_batch("gone", {}), rules=free_space))
+    assert [e.details()["evidence"] for e in gone] == ["visible_miss"]
+
+
 def test_the_free_space_rule_counts_a_miss_only_where_depth_shows_free_space() -> None:
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     free_space = UpdateRules(miss_evidence="free_space")
