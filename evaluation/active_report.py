@@ -339,14 +339,16 @@ def write(
     params: Mapping[str, Any],
     code_version: str,
     worlds: Mapping[str, Any] | None = None,
+    profile: str = "extended",
 ) -> list[Path]:
-    """results.json, table.md and the figures; `worlds`: the generated split, when it ran on one."""
+    """results.json, table.md and the figures; `worlds`: the generated split, when it ran on one;
+    `profile`: the parameter set of core/profiles.py under `params`."""
     out.mkdir(parents=True, exist_ok=True)
     settings = rows[0].get("settings", {}) if rows else {}
     header = (
         f"PBD-AG rows: mean ± sample std over {len({(r['scenario'], r['seed']) for r in rows})} "
         f"world-seed rollouts (seeds {', '.join(map(str, seeds))}); code {code_version}; "
-        "parameters: core/params.py"
+        f"profile {profile}; parameters: core/params.py"
         + (f" with {json.dumps(dict(params), sort_keys=True)}" if params else "")
         + ". Coarse: same-class greedy matching within 1.0 m; fine: same class, the correct "
         "fixture parent and a distance under 0.5 m. Rollouts: keyframes "
@@ -364,6 +366,7 @@ def write(
         "code_version": code_version,
         "seeds": list(seeds),
         "budgets": list(budgets),
+        "profile": profile,
         "params": dict(params),
         "generated_worlds": dict(worlds) if worlds else None,
         "orders": {name: make(0) for name, make in ORDERS.items()},

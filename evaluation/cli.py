@@ -115,6 +115,28 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     active.add_argument("--via-service", metavar="URL", help="run through this service's API")
     active.add_argument("--token", help="bearer token for --via-service (default: $PBDAG_TOKEN)")
     active.add_argument("--params", metavar="JSON", help="overrides of core/params.py")
+    active.add_argument(
+        "--profile",
+        choices=["extended", "paper"],
+        default="extended",
+        help="the method's parameter set (core/profiles.py), under --params (default: extended)",
+    )
+    active.add_argument(
+        "--keyframe-objects",
+        action="store_true",
+        help="navigation keyframes also run the object detector (not in the paper's pipeline)",
+    )
+    active.add_argument(
+        "--no-verifier",
+        action="store_true",
+        help="leave the verification queue and parent verification unanswered",
+    )
+    active.add_argument(
+        "--verifier-error-rate",
+        type=float,
+        default=0.0,
+        help="share of the simulated verifier's answers that are wrong (default: 0)",
+    )
     active.add_argument("--quiet", action="store_true", help="no progress lines")
     active.set_defaults(handler=needs_eval_extra(run_active))
 
@@ -279,6 +301,8 @@ def run_active(args: argparse.Namespace) -> int:
 
     import httpx
 
+    from core.params import deep_merge
+    from core.profiles import PROFILES
     from evaluation.active import ORDERS, run_rows
     from evaluation.active_report import write
     from evaluation.report import code_version
@@ -297,6 +321,8 @@ def run_active(args: argparse.Namespace) -> int:
         return fail("--budgets: every budget must be at least 1 inspection")
     if args.keyframes < 1:
         return fail("--keyframes: must be at least 1")
+    if not 0.0 <= args.verifier_error_rate <= 1.0:
+        return fail("--verifier-error-rate: must lie in [0, 1]")
     if args.generated is None and args.scenario:
         for path in args.scenario:
             if not Path(path).is_file():
@@ -307,7 +333,7 @@ def run_active(args: argparse.Namespace) -> int:
     if args.via_service and args.jobs > 1:
         return fail("--jobs: runs through --via-service go one at a time")
     try:
-        overrides = parsed_params(args.params)
+        overrides = deep_merge(dict(PROFILES[args.profile].overrides), parsed_params(args.params))
     except ValueError as error:
         return fail(f"--params: {error}")
     client = service_client(args.via_service, args.token)
@@ -319,7 +345,12 @@ def run_active(args: argparse.Namespace) -> int:
             work,
             params=overrides,
             client=client,
-            settings=RolloutSettings(keyframe_budget=args.keyframes),
+            settings=RolloutSettings(
+                keyframe_budget=args.keyframes,
+                keyframe_objects=args.keyframe_objects,
+                verifier=not args.no_verifier,
+                verifier_error_rate=args.verifier_error_rate,
+            ),
             jobs=args.jobs,
             progress=not args.quiet,
         )
@@ -341,6 +372,7 @@ def run_active(args: argparse.Namespace) -> int:
         overrides,
         code_version(),
         world_note(args),
+        profile=args.profile,
     )
     for written_path in written:
         print(f"wrote {written_path}")

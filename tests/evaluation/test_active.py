@@ -12,7 +12,9 @@ import pytest
 
 from core.navigation import Navigation
 from core.occupancy import MapGeometry
+from core.params import Params
 from core.planner import nearest_frontier, unresolved_fixtures
+from core.profiles import PAPER
 from core.values import ViewPose
 from evaluation.active import TruthObject, coarse_shortfalls, fine_scores, score_graph
 from evaluation.active_report import at_budget
@@ -240,6 +242,7 @@ def test_fine_f1_at_a_budget_is_the_curve_at_that_many_inspections() -> None:
         ),
         (["--params", "[1]"], "--params: expected a JSON object"),
         (["--keyframes", "0"], "--keyframes: must be at least 1"),
+        (["--verifier-error-rate", "1.5"], "--verifier-error-rate: must lie in [0, 1]"),
     ],
 )
 def test_the_cli_refuses_bad_arguments_clearly(
@@ -285,6 +288,24 @@ def test_the_cli_writes_table3_and_the_paired_comparison(
     run = document["runs"][0]
     assert run["coarse"]["recall"] == 1.0 and run["stop_reason"].startswith("plan done")
     assert "wrote" in capsys.readouterr().out
+
+
+def test_the_cli_runs_the_paper_profile_with_the_rollout_switches(tmp_path: Path) -> None:
+    world = tmp_path / "small.yaml"
+    world.write_text(json.dumps(SMALL))
+    out = tmp_path / "out"
+    code = main(
+        ["eval", "active", "--scenario", str(world), "--seeds", "7", "--orders", "pbdag",
+         "--budgets", "1", "--profile", "paper", "--keyframe-objects", "--no-verifier",
+         "--out", str(out), "--quiet"]
+    )  # fmt: skip
+    assert code == 0
+    document = json.loads((out / "results.json").read_text())
+    assert document["profile"] == "paper"
+    assert Params.from_dict(document["params"]) == PAPER.params
+    settings = document["runs"][0]["settings"]
+    assert settings["keyframe_objects"] is True and settings["verifier"] is False
+    assert "profile paper" in (out / "table.md").read_text()
 
 
 def test_coarse_shortfalls_name_each_missed_and_each_extra_fixture() -> None:
