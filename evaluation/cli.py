@@ -467,6 +467,10 @@ def run(args: argparse.Namespace) -> int:
     print(console_summary(protocol, rows))
     if args.generated is not None:
         print(interval_table(protocol, rows))
+    if args.protocol == "ablation":
+        from evaluation.ablation import write_effects
+
+        print(write_effects(rows, args.out))
     for path in written:
         print(f"wrote {path}")
     return 0

@@ -70,6 +70,38 @@ def ratio_interval(numerators: Sequence[float], denominators: Sequence[float]) -
     return _interval((top, bottom), pooled, pooled(top, bottom))
 
 
+def mean_difference_interval(first: Sequence[float], second: Sequence[float]) -> Interval:
+    """mean(first - second) over paired worlds with its interval (the worlds resampled once
+    for both, so what they share cancels)."""
+    a = np.asarray(first, dtype=float)
+    b = np.asarray(second, dtype=float)
+
+    def difference(x: np.ndarray, y: np.ndarray) -> float:
+        return float((x - y).mean())
+
+    return _interval((a, b), difference, difference(a, b))
+
+
+def ratio_difference_interval(
+    first: tuple[Sequence[float], Sequence[float]], second: tuple[Sequence[float], Sequence[float]]
+) -> Interval:
+    """The difference of two pooled ratios (numerators, denominators) over paired worlds."""
+    arrays = tuple(np.asarray(values, dtype=float) for values in (*first, *second))
+
+    def difference(n1: np.ndarray, d1: np.ndarray, n2: np.ndarray, d2: np.ndarray) -> float:
+        top = float(n1.sum() / d1.sum()) if d1.sum() else 0.0
+        bottom = float(n2.sum() / d2.sum()) if d2.sum() else 0.0
+        return top - bottom
+
+    return _interval(arrays, difference, difference(*arrays))
+
+
+def excludes_zero(interval: Interval) -> bool:
+    """The interval, over two worlds or more, lies wholly on one side of 0: a measurable
+    difference."""
+    return interval.worlds >= 2 and (interval.low > 0 or interval.high < 0)
+
+
 def short(value: float) -> str:
     """.833 rather than 0.833 (the paper's format); other numbers to three decimals."""
     text = f"{value:.3f}"
@@ -79,3 +111,13 @@ def short(value: float) -> str:
 def spelled(interval: Interval) -> str:
     """`.905 [.880, .927]`, the format of the generated tables."""
     return f"{short(interval.value)} [{short(interval.low)}, {short(interval.high)}]"
+
+
+def signed(interval: Interval) -> str:
+    """`+.012 [-.003, +.027]`: a difference, its sign always written."""
+
+    def one(value: float) -> str:
+        text = short(abs(value))
+        return ("-" if value < 0 else "+") + text
+
+    return f"{one(interval.value)} [{one(interval.low)}, {one(interval.high)}]"

@@ -111,3 +111,38 @@ def test_publish_reads_the_strict_headlines_and_names_what_an_older_run_lacks(
     # The older development run: its strict IDS and Event R. are dashes, and named.
     assert "| .800 [.800, .800] | - | .000 [.000, .000] | - | 1.000 [1.000, 1.000] |" in dev_part
     assert "`id_switches_any_class`, `events_recalled_identity`" in dev_part
+
+
+def test_publish_gives_each_extension_s_effect_and_table3_the_paper_s_profile(
+    tmp_path: Path,
+) -> None:
+    worlds = {"split": "test", "count": 3, "world_seeds": [1, 2, 3]}
+    ours = [dynamic_run(f"gen-{k}", True) for k in range(3)]
+    # Without the fragment rule IDF1 falls by .1 in every world; the other rows equal ours.
+    without = [{**row, "method": "PBD-AG (extended) - fragment_rule", "idf1": 0.7} for row in ours]
+    same = [{**row, "method": "PBD-AG (extended) - logodds_clamp"} for row in ours]
+    write(tmp_path / "test" / "ablation", ours + without + same, worlds)
+    active = {"coarse": {"f1": 0.9}, "fine": {"f1": 0.5}, "fine_f1_after_inspections": [0.3, 0.4]}
+    rollout = {"scenario": "gen-0", "seed": 7, "order": "pbdag", **active}
+    folder = tmp_path / "test" / "active"
+    write(folder, [rollout, {**rollout, "order": "fifo"}], worlds)
+    document = json.loads((folder / "results.json").read_text()) | {"budgets": [2]}
+    (folder / "results.json").write_text(json.dumps(document))
+    paper = tmp_path / "test" / "active-paper"
+    write(paper, [{**rollout, "fine": {"f1": 0.25}}], worlds)
+    (paper / "results.json").write_text(
+        json.dumps(json.loads((paper / "results.json").read_text()) | {"budgets": [2]})
+    )
+    readme = tmp_path / "README.md"
+    readme.write_text(f"{START}\n{END}\n")
+    args = ["--test", str(tmp_path / "test"), "--dev", str(tmp_path / "dev")]
+    assert main([*args, "--readme", str(readme), "--page", str(tmp_path / "R.md")]) == 0
+    text = readme.read_text()
+    fragment = next(line for line in text.splitlines() if line.startswith("| fragment_rule |"))
+    assert "| +.100 [+.100, +.100] |" in fragment and fragment.endswith("| better IDF1 |")
+    clamp = next(line for line in text.splitlines() if line.startswith("| logodds_clamp |"))
+    assert clamp.endswith("| none measurable |")
+    assert "| paper's gate vs none |" not in text and "Not in these runs: " in text
+    assert "| pbdag | .900 [.900, .900] | .500 [.500, .500] |" in text
+    assert "| pbdag, PBD-AG (paper) | .900 [.900, .900] | .250 [.250, .250] |" in text
+    assert "Our protocol on our worlds" in text

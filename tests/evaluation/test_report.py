@@ -156,6 +156,20 @@ def test_eval_runs_every_method_on_one_given_parameter_set_and_records_it(
     assert '"min_expected_image_fraction": 0.002' in (tmp_path / "table.md").read_text()
 
 
+def test_eval_ablation_writes_what_each_extension_adds(tmp_path: Path) -> None:
+    common = ["eval", "ablation", "--seeds", "7", "17", "--frames", "40", "--quiet"]
+    common += ["--scenario", str(SCENARIOS_DIR / "hotel-suite.yaml"), "--out", str(tmp_path)]
+    methods = ["PBD-AG (extended)", "PBD-AG (extended) - logodds_clamp"]
+    assert main([*common, "--methods", *methods]) == 0
+    document = json.loads((tmp_path / "results.json").read_text())
+    assert {r["method"] for r in document["runs"]} == set(methods)
+    clamp = document["effects"]["logodds_clamp"]
+    assert clamp["without"] == methods[1] and clamp["idf1"]["worlds"] == 2
+    assert set(document["effects"]) == {"logodds_clamp"}  # only the pairs that ran
+    table = (tmp_path / "table.md").read_text()
+    assert "## What each extension adds" in table and "| logodds_clamp |" in table
+
+
 def test_a_shipped_world_whose_recording_is_absent_is_left_out_and_a_given_one_refused(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
