@@ -17,6 +17,8 @@ from core.evolve import fold
 from core.masks import Mask
 from core.observation import Batch
 from core.params import Params
+from core.profiles import PAPER
+from core.rules import UpdateRules
 from core.state import SceneState
 from tests.core.determinism import decided_log
 from tests.core.scenes import look_pose, scene_batch, track_events
@@ -84,16 +86,20 @@ def test_removal_needs_three_visible_misses_even_when_p_is_low() -> None:
 
 
 def test_occluded_object_gets_no_negative_evidence() -> None:
-    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
-    before = state.tracks["trk-000001"]
+    # The paper's gate alone (its profile: none of our conditions on the gate).
+    start, _ = run(SceneState(params=PAPER.params), [scene_batch(f"b{i}", MUG) for i in range(3)])
+    before = start.tracks["trk-000001"]
     occluder = ((0.2, 0.1, 1.2), 0.5)  # undetected, closer than the mug, covers it
-    state, per_batch = run(
-        state, [scene_batch(f"o{i}", MUG, detect=set(), occluders=[occluder]) for i in range(30)]
-    )
+    hidden = [scene_batch(f"o{i}", MUG, detect=set(), occluders=[occluder]) for i in range(30)]
+    state, per_batch = run(start, hidden)
     assert all(events == [] for events in per_batch)
     after = state.tracks["trk-000001"]
     assert after.existence_logodds == before.existence_logodds
     assert after.visible_misses == 0 and after.lifecycle == "confirmed"
+    # The occlusion test is what spares it: without it, the same frames count misses.
+    ungated = UpdateRules(visibility_gate=False)
+    events = track_events(decide(start, hidden[0], rules=ungated))
+    assert [e.details()["evidence"] for e in events] == ["visible_miss"]
 
 
 def test_out_of_view_object_gets_no_negative_evidence() -> None:
@@ -170,6 +176,37 @@ def test_appearance_picks_which_missing_mug_a_far_sighting_is() -> None:
     observed = [e.track_id for e in per_batch[0] if e.details().get("evidence") == "observed"]
     assert observed == ["trk-000002"]
     assert len(state.tracks) == 2
+
+
+def test_the_fallback_margin_decides_between_two_mugs_that_look_alike() -> None:
+    # Two instances of one class sit 0.80 apart (CLIP-like spaces put them at 0.70-0.85).
+    basis, _ = np.linalg.qr(np.random.default_rng(5).normal(size=(32, 3)))
+    e1, e2, e3 = basis.T
+    a, b = e1, 0.80 * e1 + 0.60 * e2
+    mugs = {"mug_1": ((0.3, 0.1, 2.0), 0.12), "mug_2": ((-0.3, 0.1, 2.0), 0.12)}
+    state, _ = run(
+        SceneState(),
+        [scene_batch(f"b{i}", mugs, embeddings={"mug_1": a, "mug_2": b}) for i in range(3)],
+    )
+    state, _ = run(state, [scene_batch(f"gone{i}", EMPTY) for i in range(2)])  # both vanished
+    seen = {"mug_1": ((0.0, -0.5, 1.3), 0.12)}  # about a metre from both places
+
+    def sighting(to_a: float, to_b: float) -> list[tuple[str, str | None]]:
+        """What the far sighting became: (event type, track) of its observation or addition."""
+        y = (to_b - 0.80 * to_a) / 0.60  # cosine to b = 0.80 x + 0.60 y
+        embedding = to_a * e1 + y * e2 + math.sqrt(1 - to_a**2 - y**2) * e3
+        assert math.isclose(float(embedding @ a), to_a) and math.isclose(float(embedding @ b), to_b)
+        _, per_batch = run(state, [scene_batch("far", seen, embeddings={"mug_1": embedding})])
+        return [
+            (e.type, e.track_id)
+            for e in per_batch[0]
+            if e.type == "add" or e.details().get("evidence") == "observed"
+        ]
+
+    # .90 against .84: the margin of .05 is met, mug_1 takes its identity back.
+    assert sighting(0.90, 0.84) == [("update", "trk-000001")]
+    # .88 against .85: within the margin, appearance cannot tell: a new hypothesis.
+    assert sighting(0.88, 0.85) == [("add", "trk-000003")]
 
 
 def test_fallback_refuses_when_appearance_conflicts() -> None:
