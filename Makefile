@@ -66,15 +66,20 @@ fuzz: setup  ## schemathesis with 200 examples per operation (make test runs 15)
 DEV := evaluation/results/dev
 TEST := evaluation/results/test
 
-eval: setup  ## the paper's protocols on the shipped (development) worlds, seeds 7 17 27
+eval: setup  ## the paper's protocols on the shipped (development) worlds, seeds 7 17 27; the ablation; the gate's miss causes on 6 generated development worlds
 	$(BIN)/pbdag eval fixtures --jobs 2 --out $(DEV)/fixtures
 	$(BIN)/pbdag eval dynamic --jobs 2 --out $(DEV)/dynamic
+	$(BIN)/pbdag eval ablation --jobs 2 --out $(DEV)/ablation
 	$(BIN)/pbdag eval active --jobs 2 --seeds 7 --out $(DEV)/active
+	$(BIN)/pbdag eval active --jobs 2 --seeds 7 --orders pbdag --profile paper --out $(DEV)/active-paper
+	$(BIN)/python -m evaluation.miss_causes --generated 6 --out $(DEV)/miss_causes
 
 results: eval  ## and on the generated test split, then the README's tables (see evaluation/README.md for durations)
 	$(BIN)/pbdag eval fixtures --generated 30 --split test --jobs 2 --out $(TEST)/fixtures
 	$(BIN)/pbdag eval dynamic --generated 30 --split test --jobs 2 --out $(TEST)/dynamic
+	$(BIN)/pbdag eval ablation --generated 30 --split test --jobs 2 --out $(TEST)/ablation
 	$(BIN)/pbdag eval active --generated 20 --split test --jobs 2 --out $(TEST)/active
+	$(BIN)/pbdag eval active --generated 20 --split test --jobs 2 --orders pbdag --profile paper --out $(TEST)/active-paper
 	$(BIN)/python -m evaluation.sweep --jobs 2 --out $(DEV)/sweep
 	$(BIN)/python -m evaluation.publish --dev $(DEV) --test $(TEST)
 
