@@ -83,10 +83,16 @@ class SceneCreate(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
     name: NonEmptyLabel = Field(description="Human-readable scene name.")
+    profile: Literal["extended", "paper"] = Field(
+        "extended",
+        description="The method's parameter set: `extended` (the default: the paper's rules "
+        "plus our extensions, each a named switch) or `paper` (every rule as the paper writes "
+        "it, every extension off); `params` apply on top.",
+    )
     params: dict[str, Any] | None = Field(
         None,
-        description="Overrides of the method's default parameters (a partial nested object); "
-        "recorded in the scene's log.",
+        description="Overrides of the profile's parameters (a partial nested object); the "
+        "resolved parameters are recorded in the scene's log.",
     )
     baseline: BaselineRef | None = Field(
         None,

@@ -263,9 +263,14 @@ class _Routes:
 
 
 def _scene_create(
-    name: str, params: Mapping[str, Any] | None, baseline: BaselineRef | None
+    name: str,
+    params: Mapping[str, Any] | None,
+    baseline: BaselineRef | None,
+    profile: Literal["extended", "paper"] = "extended",
 ) -> SceneCreate:
     given: dict[str, Any] = {"name": name}
+    if profile != "extended":  # a server older than profiles knows only the default
+        given["profile"] = profile
     if params is not None:
         given["params"] = dict(params)
     if baseline is not None:
@@ -346,9 +351,11 @@ class Client:
         *,
         params: Mapping[str, Any] | None = None,
         baseline: BaselineRef | None = None,
+        profile: Literal["extended", "paper"] = "extended",
     ) -> Scene:
-        """`POST /v1/scenes`: a new scene; `params` override core/params.py's defaults."""
-        return self._send(_Routes.create_scene(_scene_create(name, params, baseline)))
+        """`POST /v1/scenes`: a new scene under `profile` (`extended`, the default, or `paper`);
+        `params` override the profile's parameters."""
+        return self._send(_Routes.create_scene(_scene_create(name, params, baseline, profile)))
 
     def scenes(self) -> list[Scene]:
         """`GET /v1/scenes`: every scene."""
@@ -571,9 +578,12 @@ class AsyncClient:
         *,
         params: Mapping[str, Any] | None = None,
         baseline: BaselineRef | None = None,
+        profile: Literal["extended", "paper"] = "extended",
     ) -> Scene:
         """`POST /v1/scenes`."""
-        return await self._send(_Routes.create_scene(_scene_create(name, params, baseline)))
+        return await self._send(
+            _Routes.create_scene(_scene_create(name, params, baseline, profile))
+        )
 
     async def scenes(self) -> list[Scene]:
         """`GET /v1/scenes`."""

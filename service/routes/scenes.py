@@ -6,7 +6,8 @@ from fastapi import APIRouter
 
 from api_schema import Scene, SceneCreate, SceneList
 from core.errors import NotFound
-from core.params import Params
+from core.params import Params, deep_merge
+from core.profiles import PROFILES
 from core.values import BaselineSource
 from service.commands import create_scene
 from service.deps import AnySceneDep, ContainerDep
@@ -18,8 +19,9 @@ router = APIRouter(prefix="/v1/scenes", tags=["scenes"])
 
 @router.post("", status_code=201, response_model=Scene)
 def post_scene(body: SceneCreate, container: ContainerDep) -> Scene:
-    """Create a scene; its parameters (defaults plus overrides) are recorded as event 0."""
-    params = Params.from_dict(body.params)  # InvalidParams (422) names the field
+    """Create a scene; its parameters (the profile's, plus overrides) are recorded as event 0."""
+    overrides = deep_merge(dict(PROFILES[body.profile].overrides), body.params or {})
+    params = Params.from_dict(overrides)  # InvalidParams (422) names the field
     if body.baseline is None:
         return scene_out(create_scene(container, body.name, params))
     # A later session in the same house: the package's fixtures keep their identities.

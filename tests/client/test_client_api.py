@@ -187,6 +187,9 @@ def test_a_bad_observation_names_its_field(service: Service, demo_batches: list[
     skewed[3] = [0.0, 0.0, 0.5, 1.0]
     batch = BatchIn(batch_id="bad-pose", frames=[frame.model_copy(update={"pose": skewed})])
     with Client(service.url) as client:
+        paper = client.create_scene("client-paper", profile="paper")
+        assert paper.params["existence"]["logodds_max"] == 30.0  # unclamped, as the paper
+        assert client.create_scene("client-ours").params["existence"]["logodds_max"] == 1.5
         scene = client.create_scene("client-bad")
         with pytest.raises(InvalidRequest) as raised:
             client.post_batch(scene.id, batch)

@@ -11,6 +11,8 @@ from typing import Any
 import pytest
 from fastapi.testclient import TestClient
 
+from core.params import Params
+from core.profiles import EXTENDED, EXTENSIONS
 from service.app import create_app
 from service.bootstrap import Container
 from service.cli import OPENAPI_PATH
@@ -119,6 +121,38 @@ def test_bad_scene_params_name_the_field(client: TestClient) -> None:
     assert response.status_code == 422
     assert response.json()["field"] == "params.lifecycle.nope"
     assert client.get("/v1/scenes").json()["scenes"] == []
+
+
+def test_a_scene_runs_the_profile_it_was_created_with(
+    container: Container, client: TestClient
+) -> None:
+    paper = client.post(
+        "/v1/scenes",
+        json={
+            "name": "paper",
+            "profile": "paper",
+            "params": {"lifecycle": {"move_min_distance_m": 0.4}},
+        },
+    )
+    assert paper.status_code == 201
+    recorded = Params.from_dict(paper.json()["params"])
+    assert [e.name for e in EXTENSIONS if e.is_on(recorded)] == []  # every extension off
+    assert recorded.lifecycle.move_min_distance_m == 0.4  # params on top of the profile
+    ours = client.post("/v1/scenes", json={"name": "ours"}).json()
+    assert Params.from_dict(ours["params"]) == EXTENDED.params  # the default profile
+    # The worker decides each scene's batches under its own profile: five sightings clamp
+    # the extended profile's log-odds at 1.5, not the paper's.
+    for scene in (paper.json()["id"], ours["id"]):
+        for k in range(5):
+            client.post(f"/v1/scenes/{scene}/batches", json=batch(f"b-{k}", k))
+    Worker(container).drain()
+    logodds = {}
+    for scene in (paper.json()["id"], ours["id"]):
+        [track] = client.get(f"/v1/scenes/{scene}/tracks").json()
+        logodds[scene] = track["existence_logodds"]
+    assert logodds == {paper.json()["id"]: 5.0, ours["id"]: 1.5}
+    unknown = client.post("/v1/scenes", json={"name": "x", "profile": "mine"})
+    assert unknown.status_code == 422 and unknown.json()["field"] == "profile"
 
 
 def test_same_batch_twice_appends_once_and_new_content_conflicts(
