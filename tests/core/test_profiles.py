@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -260,3 +261,15 @@ def test_fixtures_of_the_paper_profile_keep_a_second_table_track() -> None:
     assert (
         sum(1 for t in fixtures_of(after) if t.lifecycle == "confirmed" and t.label == "table") == 2
     )
+
+
+def test_the_method_guide_lists_every_extension_with_its_switch() -> None:
+    guide = (Path(__file__).resolve().parents[2] / "docs" / "method.md").read_text()
+    for extension in EXTENSIONS:
+        row = next(
+            (line for line in guide.splitlines() if line.startswith(f"| `{extension.name}` |")),
+            None,
+        )
+        assert row is not None, extension.name
+        section, key = next(iter(extension.paper.items()))
+        assert f"{section}.{next(iter(key))}" in row, extension.name
