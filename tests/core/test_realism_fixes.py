@@ -20,7 +20,7 @@ from core.masks import Mask
 from core.observation import Batch, Detection, Frame
 from core.params import Params
 from core.rules import UpdateRules
-from core.state import SceneState
+from core.state import SceneState, Track
 from core.visibility import observable, samples_passed
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 from tests.core.scenes import (
@@ -114,15 +114,20 @@ def test_a_sliver_at_the_image_border_is_not_a_miss() -> None:
     assert [e.details().get("evidence") for e in events] == ["visible_miss"]
 
 
-def test_a_box_grown_beside_the_object_does_not_make_its_place_look_empty() -> None:
+def with_grown_box() -> tuple[SceneState, Track]:
+    """The mug confirmed, its union box grown 0.5 m to one side and 0.4 m back (a mask that bled
+    onto a grazing support): the box's centre lies beside the mug, in front of the wall."""
     state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
     mug = state.tracks["trk-000001"]
-    # A mask that bled onto a grazing support grew the box the gate samples 0.5 m to one side
-    # and 0.4 m back: its centre now lies beside the mug, in front of the wall.
     low = [c - e / 2 for c, e in zip(mug.center, mug.extent, strict=True)]
     high = [c + e / 2 for c, e in zip(mug.center, mug.extent, strict=True)]
     grown = mug.evolved(box=(low[0], low[1], low[2], high[0] + 0.5, high[1], high[2] + 0.4))
-    state = replace(state, tracks={**state.tracks, mug.track_id: grown})
+    return replace(state, tracks={**state.tracks, mug.track_id: grown}), grown
+
+
+def test_a_box_grown_beside_the_object_does_not_make_its_place_look_empty() -> None:
+    state, grown = with_grown_box()
+    mug = grown
     still_there = scene_batch("undetected", MUG, detect=set())
     frame_seen = still_there.frames[0]
     low_high = np.array(grown.box).reshape(2, 3)
@@ -144,14 +149,8 @@ def test_a_box_grown_beside_the_object_does_not_make_its_place_look_empty() -> N
 
 
 def test_the_free_space_rule_tests_the_object_s_own_points_not_a_grown_box() -> None:
-    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(3)])
-    mug = state.tracks["trk-000001"]
-    # The union box grew 0.5 m to one side and 0.4 m back (a bleeding mask): most of its
-    # samples lie in front of the wall, where the depth shows free space.
-    low = [c - e / 2 for c, e in zip(mug.center, mug.extent, strict=True)]
-    high = [c + e / 2 for c, e in zip(mug.center, mug.extent, strict=True)]
-    grown = mug.evolved(box=(low[0], low[1], low[2], high[0] + 0.5, high[1], high[2] + 0.4))
-    state = replace(state, tracks={**state.tracks, mug.track_id: grown})
+    # Most samples of the grown box lie in front of the wall, where the depth shows free space.
+    state, _ = with_grown_box()
     free_space = UpdateRules(miss_evidence="free_space")
     # DynaMem clears per voxel: the mug's own points still show its surface, so no miss.
     still_there = scene_batch("undetected", MUG, detect=set())
