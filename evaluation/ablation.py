@@ -14,6 +14,7 @@ A difference counts as measurable when its interval excludes 0.
 from __future__ import annotations
 
 import json
+import sys
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -169,3 +170,27 @@ def write_effects(rows: Sequence[Mapping[str, Any]], out: Path) -> str:
     page = out / "table.md"
     page.write_text(page.read_text() + "\n## What each extension adds\n\n" + text)
     return text
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m evaluation.ablation OUT`: write the effects of an ablation run already in OUT
+    (its results.json rows) into its results.json and table.md."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m evaluation.ablation", description=__doc__)
+    parser.add_argument("out", type=Path, help="the folder of an `pbdag eval ablation` run")
+    args = parser.parse_args(argv)
+    results = args.out / "results.json"
+    if not results.is_file():
+        print(f"evaluation.ablation: {results}: no such file", file=sys.stderr)
+        return 2
+    document = json.loads(results.read_text())
+    if "## What each extension adds" in (args.out / "table.md").read_text():
+        print(f"evaluation.ablation: {args.out}/table.md has the effects already", file=sys.stderr)
+        return 2
+    print(write_effects(document["runs"], args.out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -9,6 +9,7 @@ from typing import Any
 
 import pytest
 
+from evaluation.ablation import main as ablation_main
 from evaluation.cli import loadable
 from evaluation.report import write_report
 from evaluation.tables import table
@@ -168,6 +169,15 @@ def test_eval_ablation_writes_what_each_extension_adds(tmp_path: Path) -> None:
     assert set(document["effects"]) == {"logodds_clamp"}  # only the pairs that ran
     table = (tmp_path / "table.md").read_text()
     assert "## What each extension adds" in table and "| logodds_clamp |" in table
+    # A run written before the effects were: they are added from its rows, once.
+    older = tmp_path / "older"
+    older.mkdir()
+    runs_only = {key: value for key, value in document.items() if key != "effects"}
+    (older / "results.json").write_text(json.dumps(runs_only))
+    (older / "table.md").write_text("# Dynamic memory\n")
+    assert ablation_main([str(older)]) == 0
+    assert json.loads((older / "results.json").read_text())["effects"] == document["effects"]
+    assert ablation_main([str(older)]) == 2  # not twice
 
 
 def test_a_shipped_world_whose_recording_is_absent_is_left_out_and_a_given_one_refused(
