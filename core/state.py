@@ -18,8 +18,10 @@ from core.params import Params
 from core.plan_ledger import PlanLedger
 from core.values import InspectionStatus, LifecycleState, TrackKind, Vec3, VerificationStatus
 
-# 4: the occupancy map, the scene clock and the inspection plan; 5: fine nodes of captures
-SNAPSHOT_FORMAT_VERSION = 5
+# 4: the occupancy map, the scene clock and the inspection plan; 5: fine nodes of captures;
+# 6: the params hold the extensions' switches (core/profiles.py), so a state written before
+# them is encoded differently (a snapshot of it is replayed instead, a rebuild rewrites it)
+SNAPSHOT_FORMAT_VERSION = 6
 
 
 def _none(value: object) -> bool:

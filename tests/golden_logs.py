@@ -75,6 +75,24 @@ def voxels_digested(state: dict[str, Any]) -> dict[str, Any]:
     return {**state, "voxels": {"sha256": hashlib.sha256(voxels).hexdigest()}}
 
 
+def only_known_keys(value: Any, like: Any) -> Any:
+    """`value` with only the keys `like` has, at every level, in `like`'s order."""
+    if isinstance(value, dict) and isinstance(like, dict):
+        return {key: only_known_keys(value[key], like[key]) for key in like if key in value}
+    return value
+
+
+def laid_out_as(state: dict[str, Any], golden: dict[str, Any]) -> dict[str, Any]:
+    """A state's JSON as the golden state lays it out: the voxel map digested, the parameters
+    added since (switches whose defaults keep the old rules) and the format version (a cache's
+    layout) set aside; every other byte as the state has it."""
+    return {
+        **voxels_digested(state),
+        "format_version": golden["format_version"],
+        "params": only_known_keys(state["params"], golden["params"]),
+    }
+
+
 def insert_rows(connection: sa.Connection, log: GoldenLog) -> list[str]:
     """Every dumped row of `log` into a migrated, empty database; the scene ids by number."""
     tables = log.tables()

@@ -3,19 +3,23 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
 from dataclasses import replace
 
 import numpy as np
 
 from core.decide import decide
-from core.events import Event, FixtureAdded, TrackReparented, TrackRetired
+from core.events import TrackReparented, TrackRetired
 from core.evolve import fold
 from core.fixture_association import FixtureTrackView, associate_fixtures
 from core.fixtures import FixtureProposal, dbscan, kept_voxels
-from core.observation import Batch
 from core.params import FixtureParams
-from core.state import SceneState, Track
+from core.state import SceneState
+from tests.core.fixture_scenes import (
+    fixtures_of,
+    run,
+    with_second_table,
+    with_twin_of_another_class,
+)
 from tests.core.rendered import (
     COUNTER,
     COUNTER_VIEWS,
@@ -25,19 +29,6 @@ from tests.core.rendered import (
     batches,
     object_on,
 )
-
-
-def run(state: SceneState, batch_list: Iterable[Batch]) -> tuple[SceneState, list[Event]]:
-    events: list[Event] = []
-    for batch in batch_list:
-        new = decide(state, batch)
-        state = fold(state, new)
-        events += new
-    return state, events
-
-
-def fixtures_of(state: SceneState) -> list[Track]:
-    return [t for t in state.tracks.values() if t.kind == "fixture"]
 
 
 def test_dbscan_separates_blobs_and_drops_noise() -> None:
@@ -134,34 +125,6 @@ def test_mug_on_the_table_gets_the_table_as_parent_and_carried_to_the_counter_re
     assert [t.track_id for t in state.tracks.values() if t.label == "mug"] == [mug.track_id]
 
 
-def with_twin_of_another_class(
-    state: SceneState, events: list[Event], twin: str, label: str, shift: float
-) -> SceneState:
-    """The state with a second track of the table's size and top, labelled `label`, `shift`
-    metres along x from the table (made from the table's own hypothesis and publication, with
-    one supporting batch fewer)."""
-    (table,) = [t for t in fixtures_of(state) if t.label == "table"]
-    center = (table.center[0] + shift, table.center[1], table.center[2])
-    copied: list[Event] = []
-    for event in events:
-        if event.track_id != table.track_id or event.type not in ("add", "confirm"):
-            continue
-        if isinstance(event, FixtureAdded):
-            observation = replace(
-                event.observations[0], label=label, center=center, extent=table.extent
-            )
-            event = replace(event, center=center, observations=(observation,))
-        copied.append(replace(event, track_id=twin))
-    twinned = fold(state, copied)
-    twin_track = twinned.tracks[twin].evolved(
-        class_evidence={label: 1.0},
-        batches_observed=table.batches_observed - 1,
-        center=center,
-        extent=table.extent,
-    )
-    return replace(twinned, tracks={**twinned.tracks, twin: twin_track})
-
-
 def test_a_fixture_track_of_another_class_in_the_same_place_is_merged() -> None:
     state, events = run(SceneState(), batches(ROOM, TABLE_VIEWS * 2, "b"))
     (table,) = [t for t in fixtures_of(state) if t.label == "table"]
@@ -177,24 +140,6 @@ def test_a_fixture_track_of_another_class_in_the_same_place_is_merged() -> None:
     # Beside the table (half its footprint shared) it is another fixture, and stays.
     beside = with_twin_of_another_class(state, events, twin, "desk", shift=TABLE.size[0] * 0.5)
     assert not [e for e in decide(beside, batch) if isinstance(e, TrackRetired)]
-
-
-def with_second_table(state: SceneState, events: list[Event], twin: str) -> SceneState:
-    """The state with a second table track: the first one's hypothesis and publication, made
-    over again 0.3 m from its center and half its size (a part of the table seen first)."""
-    (table,) = [t for t in fixtures_of(state) if t.label == "table"]
-    shift = (table.center[0] + 0.3, table.center[1], table.center[2])
-    copied: list[Event] = []
-    for event in events:
-        if event.track_id != table.track_id or event.type not in ("add", "confirm"):
-            continue
-        if isinstance(event, FixtureAdded):
-            x, y, z = event.observations[0].extent
-            half = (x / 2, y / 2, z / 2)
-            observation = replace(event.observations[0], center=shift, extent=half)
-            event = replace(event, center=shift, observations=(observation,))
-        copied.append(replace(event, track_id=twin))
-    return fold(state, copied)
 
 
 def test_a_second_track_inside_a_confirmed_fixture_is_merged_into_it() -> None:

@@ -22,12 +22,12 @@ from core.profiles import DEFAULT_PROFILE, EXTENDED, EXTENSIONS, PAPER, PROFILES
 from core.state import SceneState
 from core.support import SupportSurface, support_of
 from core.visibility import observable, samples_passed
+from tests.core.carried_mugs import SAME_AS_A, carried
+from tests.core.fixture_scenes import fixtures_of, with_second_table, with_twin_of_another_class
+from tests.core.fixture_scenes import run as run_fixtures
+from tests.core.realistic import BIN, MUG, run, split_batch, split_in_two, with_scores
 from tests.core.rendered import ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 from tests.core.scenes import look_pose, scene_batch, track_events
-from tests.core.test_fixtures import fixtures_of, with_second_table, with_twin_of_another_class
-from tests.core.test_fixtures import run as run_fixtures
-from tests.core.test_realism_fixes import BIN, MUG, run, split_batch, split_in_two, with_scores
-from tests.core.test_reidentification import SAME_AS_A, carried
 
 Outcome = Callable[[Params], object]
 

@@ -9,7 +9,7 @@ import numpy as np
 from core.decide import decide
 from core.decisions import Publication
 from core.emit import decision_events
-from core.events import Event, TrackRetired
+from core.events import TrackRetired
 from core.evolve import fold
 from core.existence import object_sighting
 from core.frontend import TrackColumns, second_tracks
@@ -17,40 +17,21 @@ from core.geometry import Proposal
 from core.inspection import decide_inspection
 from core.lifecycle import sighting_decision
 from core.masks import Mask
-from core.observation import Batch, Detection, Frame
+from core.observation import Batch, Detection
 from core.params import Params
 from core.rules import UpdateRules
 from core.state import SceneState, Track
 from core.visibility import observable, samples_passed
+from tests.core.realistic import BIN, MUG, run, split_batch, split_in_two, with_scores
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 from tests.core.scenes import (
     INTRINSICS,
-    detection,
     look_pose,
-    paint_box,
     scene_batch,
     track_events,
     wall,
 )
 from tests.core.scenes import frame as analytic_frame
-
-MUG = {"mug_1": ((0.2, 0.1, 2.0), 0.1)}
-
-
-def run(state: SceneState, batch_list: list[Batch]) -> tuple[SceneState, list[list[Event]]]:
-    per_batch = []
-    for batch in batch_list:
-        events = decide(state, batch)
-        state = fold(state, events)
-        per_batch.append(track_events(events))
-    return state, per_batch
-
-
-def with_scores(batch: Batch, label: str, scores: dict[str, float]) -> Batch:
-    """The batch's detections relabelled, with an open-vocabulary detector's class scores."""
-    first = batch.frames[0]
-    detections = tuple(replace(d, label=label, class_scores=scores) for d in first.detections)
-    return replace(batch, frames=(replace(first, detections=detections),))
 
 
 def test_a_label_flickering_between_confusable_classes_stays_one_track() -> None:
@@ -222,26 +203,6 @@ def test_an_inspected_child_matching_a_hypothesis_is_published() -> None:
     assert after.tracks[book.track_id].lifecycle == "confirmed"
 
 
-def split_in_two(view: Frame, label: str, axis: int = 0) -> Frame:
-    """The frame with the `label` object's mask reported as two halves: left and right (axis
-    0, split across columns) or top and bottom (axis 1, across rows)."""
-    detections = []
-    for d in view.detections:
-        if d.label != label:
-            detections.append(d)
-            continue
-        mask = d.mask.to_array()
-        lines = np.flatnonzero(mask.any(axis=axis))
-        middle = int(lines[len(lines) // 2])
-        first, second = mask.copy(), mask.copy()
-        if axis == 0:
-            first[:, middle:], second[:, :middle] = False, False
-        else:
-            first[middle:, :], second[:middle, :] = False, False
-        detections += [replace(d, mask=Mask.from_array(half)) for half in (first, second)]
-    return replace(view, detections=tuple(detections))
-
-
 def test_an_inspected_object_over_segmented_in_the_primary_view_is_one_child() -> None:
     world = ROOM.with_object(object_on(TABLE, "book", "book", (0.3, 0.2, 0.05), at=(-0.3, 0.1)))
     state, _ = run(SceneState(), list(batches(world, TABLE_VIEWS * 2, "b")))
@@ -266,22 +227,6 @@ def test_a_batch_with_full_frame_masks_is_bounded_by_sampling() -> None:
     events = track_events(decide(SceneState(), batch))
     observation = events[0].details()["observations"][0]
     assert abs(observation["valid_pixels"] - mask.size) <= mask.size * 0.01
-
-
-BIN = {"bin_1": ((0.2, 0.1, 2.0), 0.3)}  # large enough that either half of its mask grounds
-
-
-def split_batch(batch_id: str) -> Batch:
-    """The bin of BIN reported as two masks, its left and right halves (over-segmentation)."""
-    depth = wall()
-    mask = paint_box(depth, *BIN["bin_1"])
-    columns = np.flatnonzero(mask.any(axis=0))
-    middle = int(columns[len(columns) // 2])
-    left, right = mask.copy(), mask.copy()
-    left[:, middle:] = False
-    right[:, :middle] = False
-    pieces = (detection("bin", left), detection("bin", right))
-    return Batch(batch_id, (analytic_frame(f"{batch_id}-f0", depth, pieces),))
 
 
 def test_an_over_segmented_object_stays_one_track() -> None:

@@ -42,7 +42,7 @@ from sim.rollout import rollout  # noqa: E402
 from sim.scenario import load_scenario, scenario_from_dict  # noqa: E402
 from sim.stream import iter_frames, iter_wire_batches  # noqa: E402
 from tests.clients import local_pbdag_client  # noqa: E402
-from tests.core import test_reidentification as carried  # noqa: E402
+from tests.core import carried_mugs as carried  # noqa: E402
 from tests.core.scenes import scene_batch  # noqa: E402
 from tests.evaluation.test_active import SMALL  # noqa: E402
 
@@ -94,7 +94,7 @@ def wire(batch: Batch) -> BatchIn:
 
 
 def carried_mug_batches() -> Iterator[Batch]:
-    """tests/core/test_reidentification.py's carried mug: seen elsewhere, then its place empty."""
+    """tests/core/carried_mugs.py's carried mug: seen elsewhere, then its place empty."""
     both = {"mug_1": carried.A, "mug_2": carried.B}
     for i in range(3):
         yield scene_batch(f"b{i}", carried.TWO_MUGS, embeddings=both, t=float(i))
