@@ -3,17 +3,12 @@ fallback's tests."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-
 import numpy as np
 
-from core.decide import decide
 from core.events import Event
-from core.evolve import fold
-from core.observation import Batch
 from core.params import Params
 from core.state import SceneState
-from tests.core.scenes import look_pose, scene_batch, track_events
+from tests.core.scenes import look_pose, run_log, scene_batch, track_events
 
 RNG = np.random.default_rng(17)
 A, B, C = (RNG.normal(size=32) for _ in range(3))
@@ -25,13 +20,7 @@ TURNED = look_pose(90.0)
 ELSEWHERE = ((0.0, 0.1, 2.0), 0.1)  # in the turned view: about 2.8 m from mug_1's place
 
 
-def run(state: SceneState, batches: Iterable[Batch]) -> tuple[SceneState, list[Event]]:
-    log: list[Event] = []
-    for batch in batches:
-        events = decide(state, batch)
-        state = fold(state, events)
-        log += events
-    return state, log
+run = run_log
 
 
 def carried(seen_there: np.ndarray, params: Params | None = None) -> tuple[SceneState, list[Event]]:

@@ -3,23 +3,14 @@ made from the table's own."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from dataclasses import replace
 
-from core.decide import decide
 from core.events import Event, FixtureAdded
 from core.evolve import fold
-from core.observation import Batch
 from core.state import SceneState, Track
+from tests.core.scenes import run_log
 
-
-def run(state: SceneState, batch_list: Iterable[Batch]) -> tuple[SceneState, list[Event]]:
-    events: list[Event] = []
-    for batch in batch_list:
-        new = decide(state, batch)
-        state = fold(state, new)
-        events += new
-    return state, events
+run = run_log
 
 
 def fixtures_of(state: SceneState) -> list[Track]:

@@ -6,9 +6,12 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from core.decide import decide
 from core.events import Event, OccupancyEvidence
+from core.evolve import fold
 from core.masks import Mask
 from core.observation import Batch, Detection, Frame, Intrinsics
+from core.state import SceneState
 
 INTRINSICS = Intrinsics(width=160, height=120, fx=130.0, fy=130.0, cx=79.5, cy=59.5)
 
@@ -99,3 +102,13 @@ def track_events(events: Iterable[Event]) -> list[Event]:
     """The events of a batch about tracks: its occupancy map evidence set aside (a camera
     turned about its y axis sees a floor and walls in the world's height band)."""
     return [e for e in events if not isinstance(e, OccupancyEvidence)]
+
+
+def run_log(state: SceneState, batches: Iterable[Batch]) -> tuple[SceneState, list[Event]]:
+    """Each batch decided and folded in turn: the state after them and every event, in order."""
+    log: list[Event] = []
+    for batch in batches:
+        events = decide(state, batch)
+        state = fold(state, events)
+        log += events
+    return state, log
