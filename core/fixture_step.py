@@ -139,7 +139,9 @@ def contained_tracks(
 ) -> dict[str, str]:
     """Second tracks of one fixture: inside the expanded footprint of a confirmed track this
     batch's cluster matched, of a class that cluster supports, or of any class in the same
-    place (`same_place`) with fewer supporting batches; each -> the track it joins."""
+    place (`same_place`) with fewer supporting batches; each -> the track it joins. A pinned
+    fixture (a frozen baseline's) is never one: it is exempt from dynamic removal (section
+    3.3)."""
     matched = set(matches.values())
     merged: dict[str, str] = {}
     views = {view.track_id: view for view in tracks}
@@ -155,6 +157,7 @@ def contained_tracks(
                 or other.track_id in merged
                 or track.lifecycle not in ("tentative", "confirmed", "demoted")
                 or track.verification == "pending"
+                or track.pinned
             ):
                 continue
             same_class = other.label == keeper.label or compatible(

@@ -181,3 +181,19 @@ def test_a_second_track_inside_a_confirmed_fixture_is_merged_into_it() -> None:
         for e in decide(state, next(iter(batches(ROOM, TABLE_VIEWS[:1], "p"))), paper)
         if isinstance(e, TrackRetired)
     ]
+
+
+def test_a_pinned_fixture_is_never_merged_away() -> None:
+    # Pinned fixtures (a frozen baseline's) are exempt from dynamic removal (section 3.3): the
+    # same-place and contained-track merges retire other tracks, never them.
+    state, events = run(SceneState(), batches(ROOM, TABLE_VIEWS * 2, "b"))
+    again = next(iter(batches(ROOM, TABLE_VIEWS[:1], "again")))
+    twin = "trk-000099"
+    for second in (
+        with_twin_of_another_class(state, events, twin, "desk", shift=0.05),
+        with_second_table(state, events, twin),
+    ):
+        assert [e.track_id for e in decide(second, again) if isinstance(e, TrackRetired)] == [twin]
+        pinned = second.tracks[twin].evolved(pinned=True)
+        kept = replace(second, tracks={**second.tracks, twin: pinned})
+        assert not [e for e in decide(kept, again) if isinstance(e, TrackRetired)]
