@@ -24,7 +24,7 @@ NEVER_S = 1.0e9
 class Extension:
     """One rule beside the paper's, and the parameter values that switch it off."""
 
-    name: str  # an identifier: the row of the leave-one-out table, `--without NAME`
+    name: str  # an identifier: its leave-one-out row is `PBD-AG (extended) - NAME`
     title: str  # what it does, in a few words
     section: str  # the paper's section it departs from
     paper: Mapping[str, Any]  # nested overrides that restore the paper's rule
