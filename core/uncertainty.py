@@ -48,12 +48,17 @@ def existence_term(p_exist: float) -> float:
 
 
 def evidence_logodds(fixture: Track, params: Params) -> float:
-    """Equation (3) over the fixture's counted evidence, unclamped: the prior, eta_o per
+    """The fixture's existence log-odds without the clamp. Below the clamp's top the state's
+    log-odds is equation (3) exactly, and is returned as it is (the paper's profile, whose
+    log-odds are unclamped, always reads it). Pinned at the top, the clamp has dropped what lay
+    above it, so equation (3) is summed over the fixture's counted evidence: the prior, eta_o per
     supporting batch, eta_c for a confirming verdict (eta_r off for a rejection), eta_m per
-    visibility-admissible miss since its last positive batch (the counter restarts there).
-    Never below the state's log-odds: a fixture loaded from a baseline carries its log-odds and
-    no batches."""
+    visibility-admissible miss since its last positive batch (the counter restarts there; misses
+    before it are not counted). Never below the state's log-odds: a fixture loaded from a
+    baseline carries its log-odds and no batches."""
     e = params.existence
+    if fixture.existence_logodds < e.logodds_max:
+        return fixture.existence_logodds
     logodds = e.prior_logodds + e.eta_observed * fixture.batches_observed
     logodds -= e.eta_missed * fixture.visible_misses
     if fixture.verification == "confirmed":

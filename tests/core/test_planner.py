@@ -63,7 +63,7 @@ def test_fixture_uncertainty_equals_the_hand_computed_weighted_terms() -> None:
         "trk-000001",
         (3.0, 3.0, 0.375),
         (1.0, 1.0, 0.75),
-        existence_logodds=0.0,  # the state's (clamped) value; the term reads the evidence:
+        existence_logodds=0.0,  # below the clamp's top: equation (3) as it is, p = 0.5
         class_evidence={"table": 3.0, "desk": 1.0},  # p = (0.75, 0.25)
         batches_observed=3,
         margin_sum=0.24,  # mean margin 0.08
@@ -77,9 +77,9 @@ def test_fixture_uncertainty_equals_the_hand_computed_weighted_terms() -> None:
     # 0.5 * 0.2889830987 + 0.5 * 0.5 = 0.3944915493.
     # position: var x = 0.045 (two centres 0.3 m apart), var y = 0: sqrt(0.045) / 0.30.
     # age: (400 - 100) / 600 = 0.5; confirmation: (12 - 3) / (12 - 3) = 1; parent: none = 0.
-    # existence: 3 batches, evidence 3.0, p = logistic(3) = 0.9525741268, 4 p (1 - p).
+    # existence: 4 * 0.5 * 0.5 = 1 (the state's log-odds, not pinned by the clamp, is read).
     expected = {
-        "existence": 0.1807066389,
+        "existence": 1.0,
         "class": 0.3944915493,
         "parent": 0.0,
         "position": 0.7071067812,
@@ -88,9 +88,8 @@ def test_fixture_uncertainty_equals_the_hand_computed_weighted_terms() -> None:
     }
     assert tuple(u.terms) == TERMS
     assert u.terms == pytest.approx(expected, abs=1e-9)
-    # .20 * 0.1807066389 + .30 * 0.3944915493 + .10 * 0 + .15 * 0.7071067812 + .10 * 0.5
-    # + .15 * 1
-    assert u.value == pytest.approx(0.4605548098, abs=1e-9)
+    # .20 * 1 + .30 * 0.3944915493 + .10 * 0 + .15 * 0.7071067812 + .10 * 0.5 + .15 * 1
+    assert u.value == pytest.approx(0.6244134820, abs=1e-9)
 
 
 def test_every_uncertainty_term_stays_in_0_1_and_a_settled_fixture_is_nearly_certain() -> None:
@@ -131,6 +130,11 @@ def test_the_existence_term_reads_the_unclamped_evidence_not_the_clamped_log_odd
     assert existence(batches_observed=3, visible_misses=2) == pytest.approx(0.5590551677, abs=1e-9)
     # A fixture loaded from a baseline has no batches yet: its stored log-odds stands.
     assert existence(batches_observed=0, pinned=True) == pytest.approx(0.5965858083, abs=1e-9)
+    # Below the clamp's top the state's log-odds is equation (3) exactly and is read as it is
+    # (l = 1.0, p = 0.731, whatever the counters say); the paper's unclamped profile always is.
+    assert existence(existence_logodds=1.0, batches_observed=3) == pytest.approx(
+        4 * 0.7310585786 * (1 - 0.7310585786), abs=1e-9
+    )
 
 
 # -- equation (5) ------------------------------------------------------------------------------
@@ -181,16 +185,16 @@ def two_fixture_room() -> list[str]:
 
 def test_target_is_the_argmax_of_equation_5_and_a_fixture_without_a_view_is_deferred() -> None:
     state = scene(grid_of(two_fixture_room()), A, B)
-    # A: u = 0.4605548098 (the hand-computed fixture above); planar distance from the robot
-    # sqrt(4.48^2 + 2.98^2) = 5.3806 m: Prox = 1 - 5.3806 / 8 = 0.3274; score 0.4339.
+    # A: u = 0.6244134820 (the hand-computed fixture above); planar distance from the robot
+    # sqrt(4.48^2 + 2.98^2) = 5.3806 m: Prox = 1 - 5.3806 / 8 = 0.3274; score 0.5650.
     # B: u = 0.2 * 2.4576547e-5 + 0.1 * 0.5 (unseen for 300 of 600 s) = 0.0500049; distance
     # 1.6688 m: Prox = 0.7914; score 0.1983.
     decided = plan(state, ROBOT)
     assert [c.fixture_id for c in decided.ranked] == [A.track_id, B.track_id]
     first, second = decided.ranked
-    assert first.uncertainty.value == pytest.approx(0.4605548098, abs=1e-9)
+    assert first.uncertainty.value == pytest.approx(0.6244134820, abs=1e-9)
     assert first.proximity == pytest.approx(1 - math.hypot(4.48, 2.98) / 8, abs=1e-12)
-    assert first.score == pytest.approx(0.8 * 0.4605548098 + 0.2 * first.proximity, abs=1e-9)
+    assert first.score == pytest.approx(0.8 * 0.6244134820 + 0.2 * first.proximity, abs=1e-9)
     assert second.score == pytest.approx(
         0.8 * (0.2 * 2.4576547e-5 + 0.1 * 0.5) + 0.2 * (1 - math.hypot(1.18, 1.18) / 8), abs=1e-9
     )
