@@ -39,9 +39,8 @@ import argparse
 import math
 import os
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -54,116 +53,28 @@ from sim.detector_model import RealisticDetector
 from sim.free_space import FreeSpace
 from sim.memories import (
     InProcessMemory,
-    InspectionOutcome,
     Memory,
-    Node,
     PlanStep,
     Ranked,
-    Recorded,
     Refusal,
     ServiceMemory,
-    TrackSummary,
-    VerdictOutcome,
 )
 from sim.render import add_kinect_noise, render
+from sim.rollout_records import Capture, RolloutResult, RolloutSettings
 from sim.scenario import load_scenario
 from sim.scenario_spec import Scenario
 from sim.stream import run_rng
 from sim.timeline import Timeline
-from sim.truth import TruthFixture
-from sim.verifier import SOURCE, SimulatedVerifier
+from sim.verifier import (
+    SimulatedVerifier,
+    answer_verifications,
+    parent_verified,
+)
 from sim.wire import make_batch, make_frame
 
+__all__ = ["Capture", "RolloutResult", "RolloutSettings", "rollout"]
+
 FloatArray = npt.NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class RolloutSettings:
-    """How the simulated robot acts; defaults are the protocol's (documented in sim/scenarios/README.md)."""
-
-    keyframe_budget: int = 600  # coarse discovery: semantic keyframes posted on the way
-    # Inspections the memory recorded (None: until the plan is done). A capture the memory
-    # refused (a 4xx: nothing appended, e.g. its target merged away while the robot drove to
-    # it) is no inspection: it is kept in `refused` and the robot asks for the plan again.
-    inspection_budget: int | None = None
-    keyframe_spacing_m: float = 0.5  # one keyframe per this much travel
-    look_around_views: int = 6  # keyframes of a turn in place (60 degrees apart, FOV 62)
-    keyframe_pitch_deg: float = -20.0  # keyframes look a little down, at furniture tops
-    sweep_yaw_deg: tuple[float, ...] = (0.0, -20.0, 20.0)  # the primary view, then alternates
-    grid_m: float = 0.10  # the true free-space grid the robot drives on
-    max_decisions: int = 400  # a bound on plans asked (a rollout that loops stops here)
-    max_visits_per_goal: int = 3  # an explore goal reached this often is recorded as stuck
-    # Keyframes carry the object detector's output too (off: the paper's pipeline, where fine
-    # objects come from fixture-centered captures only).
-    keyframe_objects: bool = False
-    # The simulated VLM answers coarse-stage and parent verification (off: neither is asked,
-    # a fixture waiting for a verdict stays unpublished and captures carry no verification).
-    verifier: bool = True
-    # The chance each answer is wrong. 0 by default: the paper gives no rate for its VLM, so
-    # the protocol's default measures the memory's mechanics with a truthful verifier; a sweep
-    # of this knob measures how much a wrong one costs.
-    verifier_error_rate: float = 0.0
-
-
-@dataclass(frozen=True)
-class VerdictRecord:
-    """One coarse-stage verdict the simulated verifier gave, and what the memory made of it."""
-
-    track_id: str
-    asked_label: str  # the track's label when asked
-    verdict: str  # confirm or reject
-    label: str  # the class the verdict names
-    truth_id: str | None  # the true fixture under the track, if any
-    wrong: bool  # the error draw flipped the answer
-    outcome: VerdictOutcome  # the track's state after it, or the memory's refusal
-
-
-@dataclass
-class Capture:
-    """One inspection the robot made."""
-
-    fixture_id: str
-    view: tuple[float, float, float, float]
-    outcome: InspectionOutcome
-    keyframes_before: int
-    graph_after: list[Node]
-    fixture_verified: bool | None = None  # the verifier's parent verification
-    target: Ranked | None = None  # equation (5)'s terms when the plan chose the fixture
-
-    @property
-    def completed(self) -> bool:
-        """The memory recorded the capture as a completed inspection."""
-        return self.outcome == Recorded("completed")
-
-
-@dataclass
-class RolloutResult:
-    """What one rollout did and what the memory holds at its end."""
-
-    scenario: str
-    seed: int
-    order: str
-    via_service: bool
-    path: list[tuple[float, float]] = field(default_factory=list)
-    keyframes: list[tuple[float, float, float]] = field(default_factory=list)  # x, y, travelled
-    captures: list[Capture] = field(default_factory=list)  # inspections the memory recorded
-    refused: list[Capture] = field(default_factory=list)  # captures it refused (nothing recorded)
-    decisions: list[dict[str, Any]] = field(default_factory=list)
-    verdicts: list[VerdictRecord] = field(default_factory=list)
-    plan_ms: list[float] = field(default_factory=list)
-    stop_reason: str = ""
-    stuck_goals: list[tuple[float, float]] = field(default_factory=list)
-    final_graph: list[Node] = field(default_factory=list)
-    final_tracks: list[TrackSummary] = field(default_factory=list)
-    final_queue: list[str] = field(default_factory=list)
-    occupancy: dict[str, Any] = field(default_factory=dict)
-    truth_fixtures: tuple[TruthFixture, ...] = ()
-    truth_objects: tuple[tuple[str, str, tuple[float, float, float], str], ...] = ()
-    seconds: float = 0.0
-
-    @property
-    def path_length_m(self) -> float:
-        return sum(math.dist(a, b) for a, b in zip(self.path, self.path[1:], strict=False))
 
 
 class Robot:
@@ -277,42 +188,6 @@ def _wrap(angle: float) -> float:
     return math.atan2(math.sin(angle), math.cos(angle))
 
 
-def answer_verifications(
-    verifier: SimulatedVerifier | None, memory: Memory, result: RolloutResult
-) -> None:
-    """Coarse-stage verification (section 3.2): one verdict per fixture in the memory's
-    verification queue, about the frame it names to crop (its best frame)."""
-    if verifier is None:
-        return
-    for pending in memory.pending_verifications():
-        answer = verifier.coarse(pending.track_id, pending.label, pending.center)
-        verdict: Literal["confirm", "reject"] = "confirm" if answer.confirm else "reject"
-        outcome = memory.verify(pending.track_id, verdict, answer.label, SOURCE, pending.best_frame)
-        result.verdicts.append(
-            VerdictRecord(
-                pending.track_id,
-                pending.label,
-                verdict,
-                answer.label,
-                answer.truth_id,
-                answer.wrong,
-                outcome,
-            )
-        )
-
-
-def _parent_verified(
-    verifier: SimulatedVerifier | None, memory: Memory, capture_id: str, fixture_id: str
-) -> bool | None:
-    """Parent verification at the capture (section 3.4): the target's class at its place."""
-    if verifier is None:
-        return None
-    fixture = memory.track(fixture_id)
-    if fixture is None:
-        return None  # the memory no longer knows it: the capture is refused anyway
-    return verifier.parent(capture_id, fixture.label, fixture.center)
-
-
 def _inspect(
     robot: Robot,
     memory: Memory,
@@ -333,7 +208,7 @@ def _inspect(
     frames = robot.sweep(vyaw, vpitch)
     capture_id = f"cap-{len(result.captures) + len(result.refused):03d}"
     view = ViewPose(x=vx, y=vy, yaw=_wrap(vyaw))
-    verified = _parent_verified(verifier, memory, capture_id, step.fixture_id)
+    verified = parent_verified(verifier, memory, capture_id, step.fixture_id)
     outcome = memory.inspect(capture_id, step.fixture_id, frames, view, verified)
     capture = Capture(
         step.fixture_id,
@@ -441,7 +316,7 @@ def rollout(
         if len(result.decisions) >= settings.max_decisions:
             result.stop_reason = "decision bound reached"
             break
-        answer_verifications(verifier, memory, result)
+        result.verdicts += answer_verifications(verifier, memory)
         begun = time.perf_counter()
         step = memory.plan(robot.pose)
         result.plan_ms.append(1000 * (time.perf_counter() - begun))

@@ -23,8 +23,12 @@ import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, Literal
 
 from sim.world import Box
+
+if TYPE_CHECKING:
+    from sim.memories import Memory, VerdictOutcome
 
 SOURCE = "simulated-vlm"  # the verdicts' `source`
 
@@ -103,3 +107,55 @@ class SimulatedVerifier:
         digest = hashlib.sha256(f"{self.seed}:{question}".encode()).digest()
         uniform = int.from_bytes(digest[:8], "big") / 2**64
         return uniform < self.error_rate
+
+
+# -- the closed loop asks it, through the memory a robot talks to ----------------------------
+
+
+@dataclass(frozen=True)
+class VerdictRecord:
+    """One coarse-stage verdict the simulated verifier gave, and what the memory made of it."""
+
+    track_id: str
+    asked_label: str  # the track's label when asked
+    verdict: str  # confirm or reject
+    label: str  # the class the verdict names
+    truth_id: str | None  # the true fixture under the track, if any
+    wrong: bool  # the error draw flipped the answer
+    outcome: VerdictOutcome  # the track's state after it, or the memory's refusal
+
+
+def answer_verifications(verifier: SimulatedVerifier | None, memory: Memory) -> list[VerdictRecord]:
+    """Coarse-stage verification (section 3.2): one verdict per fixture in the memory's
+    verification queue, about the frame it names to crop (its best frame)."""
+    records: list[VerdictRecord] = []
+    if verifier is None:
+        return records
+    for pending in memory.pending_verifications():
+        answer = verifier.coarse(pending.track_id, pending.label, pending.center)
+        verdict: Literal["confirm", "reject"] = "confirm" if answer.confirm else "reject"
+        outcome = memory.verify(pending.track_id, verdict, answer.label, SOURCE, pending.best_frame)
+        records.append(
+            VerdictRecord(
+                pending.track_id,
+                pending.label,
+                verdict,
+                answer.label,
+                answer.truth_id,
+                answer.wrong,
+                outcome,
+            )
+        )
+    return records
+
+
+def parent_verified(
+    verifier: SimulatedVerifier | None, memory: Memory, capture_id: str, fixture_id: str
+) -> bool | None:
+    """Parent verification at the capture (section 3.4): the target's class at its place."""
+    if verifier is None:
+        return None
+    fixture = memory.track(fixture_id)
+    if fixture is None:
+        return None  # the memory no longer knows it: the capture is refused anyway
+    return verifier.parent(capture_id, fixture.label, fixture.center)
