@@ -13,7 +13,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol, TypeVar
+from typing import Any, Protocol, TypeVar
 
 from api_schema import BatchIn, InspectionIn, RobotPose, TrackBelief, VerdictIn
 from codec.observations import decode_batch, decode_frames
@@ -145,14 +145,7 @@ class Memory(Protocol):
         fixture_verified: bool | None = None,
     ) -> InspectionOutcome: ...
     def pending_verifications(self) -> list[PendingVerification]: ...
-    def verify(
-        self,
-        track_id: str,
-        verdict: Literal["confirm", "reject"],
-        label: str | None,
-        source: str,
-        frame_id: str | None,
-    ) -> VerdictOutcome: ...
+    def verify(self, track_id: str, body: VerdictIn) -> VerdictOutcome: ...
     def track(self, track_id: str) -> TrackSummary | None: ...
     def graph(self) -> list[Node]: ...
     def tracks(self) -> list[TrackSummary]: ...
@@ -243,15 +236,7 @@ class InProcessMemory:
         tracks = [self.state.tracks[i] for i in pending_verifications(self.state)]
         return [PendingVerification(t.track_id, t.label, t.center, t.best_frame) for t in tracks]
 
-    def verify(
-        self,
-        track_id: str,
-        verdict: Literal["confirm", "reject"],
-        label: str | None,
-        source: str,
-        frame_id: str | None,
-    ) -> VerdictOutcome:
-        body = VerdictIn(verdict=verdict, label=label, source=source, frame_id=frame_id)
+    def verify(self, track_id: str, body: VerdictIn) -> VerdictOutcome:
         try:
             events = decide_verdict(
                 self.state, track_id, body.verdict, body.label, body.source, body.frame_id
@@ -381,15 +366,7 @@ class ServiceMemory:
     def _belief(self, track_id: str) -> TrackBelief:
         return self._patiently(lambda: self.client.track(self.scene_id, track_id))
 
-    def verify(
-        self,
-        track_id: str,
-        verdict: Literal["confirm", "reject"],
-        label: str | None,
-        source: str,
-        frame_id: str | None,
-    ) -> VerdictOutcome:
-        body = VerdictIn(verdict=verdict, label=label, source=source, frame_id=frame_id)
+    def verify(self, track_id: str, body: VerdictIn) -> VerdictOutcome:
         try:
             result = self._patiently(
                 lambda: self.client.post_verdict(self.scene_id, track_id, body)

@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
+from api_schema import VerdictIn
 from sim.world import Box
 
 if TYPE_CHECKING:
@@ -134,7 +135,10 @@ def answer_verifications(verifier: SimulatedVerifier | None, memory: Memory) -> 
     for pending in memory.pending_verifications():
         answer = verifier.coarse(pending.track_id, pending.label, pending.center)
         verdict: Literal["confirm", "reject"] = "confirm" if answer.confirm else "reject"
-        outcome = memory.verify(pending.track_id, verdict, answer.label, SOURCE, pending.best_frame)
+        body = VerdictIn(
+            verdict=verdict, label=answer.label, source=SOURCE, frame_id=pending.best_frame
+        )
+        outcome = memory.verify(pending.track_id, body)
         records.append(
             VerdictRecord(
                 pending.track_id,
