@@ -68,12 +68,11 @@ def associate(
         near = distances < params.max_center_distance_m
         if pool.eligible is not None:
             near &= pool.eligible
+        observed = class_distribution(proposal.label, proposal.class_scores)
         for i in (int(k) for k in np.flatnonzero(near)):
             if pool.kinds[i] != proposal.kind:
                 continue
-            if not classes_agree(
-                pool.class_belief_of(i), proposal.label, proposal.class_scores, params
-            ):
+            if not classes_agree(pool.class_belief_of(i), proposal.label, observed, params):
                 continue
             if not appearance_agrees(
                 pool.embedding_of(i), proposal.embedding, params.min_appearance_cosine
@@ -120,14 +119,13 @@ def _fallback(
     taken: set[int] = set()
     for j in free:
         proposal = proposals[j]
+        observed = class_distribution(proposal.label, proposal.class_scores)
         same_class = [
             int(i)
             for i in candidates
             if int(i) not in taken
             and pool.kinds[int(i)] == proposal.kind
-            and classes_agree(
-                pool.class_belief_of(int(i)), proposal.label, proposal.class_scores, params
-            )
+            and classes_agree(pool.class_belief_of(int(i)), proposal.label, observed, params)
         ]
         if not same_class:
             continue
@@ -259,7 +257,10 @@ def _piece_of(
 def _proposals_agree(a: Proposal, b: Proposal, params: AssociationParams) -> bool:
     """Class agreement of two detections (the gate's, with `a`'s evidence as the belief)."""
     return classes_agree(
-        class_distribution(a.label, a.class_scores), b.label, b.class_scores, params
+        class_distribution(a.label, a.class_scores),
+        b.label,
+        class_distribution(b.label, b.class_scores),
+        params,
     )
 
 

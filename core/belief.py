@@ -58,14 +58,14 @@ def class_compatibility(belief: Mapping[str, float], observed: Mapping[str, floa
 def classes_agree(
     belief: Mapping[str, float],
     label: str,
-    scores: Mapping[str, float] | None,
+    observed: Mapping[str, float],
     params: AssociationParams,
 ) -> bool:
-    """Class agreement of the association gate between a class belief and a detection: ours,
-    their soft compatibility reaches `min_class_compatibility`; the paper's
-    (`soft_class_agreement` False), the detection's label is the belief's most likely class."""
+    """Class agreement of the association gate between a class belief and a detection (its
+    `label` and its class evidence `observed`, `class_distribution` of it): ours, their soft
+    compatibility reaches `min_class_compatibility`; the paper's (`soft_class_agreement`
+    False), the detection's label is the belief's most likely class."""
     if params.soft_class_agreement:
-        observed = class_distribution(label, scores)
         return class_compatibility(belief, observed) >= params.min_class_compatibility
     return most_supported(belief) == label
 
