@@ -4,11 +4,11 @@ phi_i holds six terms, each increasing from 0 (certain) to 1, in the paper's ord
 existence, class, parent, position, age, confirmation. The transforms are documented with their
 constants in core/params.py (UncertaintyParams).
 
-The existence term reads the fixture's evidence, not its clamped log-odds: the clamp
-(`ExistenceParams.logodds_max`, 1.5) exists so that misses can remove a long-seen object, and
-it pins every confirmed fixture at p = 0.82, which would make 4 p (1 - p) the constant .597.
-The evidence is equation (3) summed over the fixture's counters without the clamp
-(`evidence_logodds`). A fixture's parent term is 0 as long as it has no parent evidence (the
+The existence term reads the state's log-odds, equation (3) exactly, wherever the clamp leaves
+it; the clamp (`ExistenceParams.logodds_max`, 1.5, an extension) exists so that misses can
+remove a long-seen object, and it pins every confirmed fixture at p = 0.82, which would make
+4 p (1 - p) the constant .597. Pinned there, the term reads equation (3) summed over the
+fixture's counters without the clamp (`evidence_logodds`). A fixture's parent term is 0 as long as it has no parent evidence (the
 frontend gives fixtures none), so its weight (.10) is spent on a constant for fixtures.
 """
 
