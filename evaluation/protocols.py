@@ -28,8 +28,9 @@ from evaluation.methods import OURS, Method
 from evaluation.metrics import fixture_scores, global_assignment, identity_metrics, presence_f1
 from evaluation.predictions import FramePrediction
 from pbdag_client import Client
+from sim.observability import empty_place_batches
 from sim.scenario import load_scenario
-from sim.stream import SimRun, simulate, wire_batches
+from sim.stream import SimRun, frame_source, simulate, wire_batches
 from sim.truth import FrameTruth
 
 FRAMES_PER_BATCH = 2  # a batch is the update step t: two frames, as the robot posts them
@@ -42,6 +43,9 @@ class Stream:
     scenario_path: Path
     run: SimRun
     batches: tuple[WireBatch, ...]
+    # Per scheduled change: for a disappearance, in how many batches of the latency bound its
+    # empty place was in view (sim.observability.empty_place_batches); None otherwise.
+    empty_place_batches: tuple[int | None, ...] = ()
 
 
 def make_stream(
@@ -53,7 +57,17 @@ def make_stream(
     """Simulate a scenario once per seed (optionally shortened, or with some of its fields
     overridden, such as the detector's); every method reads its batches."""
     run = simulate(load_scenario(path, scenario_overrides, frames=frames), seed)
-    return Stream(path, run, tuple(wire_batches(run, FRAMES_PER_BATCH)))
+    recording = frame_source(run.scenario).recording
+    empty = empty_place_batches(
+        run.scenario,
+        run.events,
+        run.observable_frames,
+        run.frames[0].camera,
+        [frame.pose for frame in run.frames],
+        FRAMES_PER_BATCH,
+        None if recording is None else recording.depth,
+    )
+    return Stream(path, run, tuple(wire_batches(run, FRAMES_PER_BATCH)), empty)
 
 
 def acquired_truth(run: SimRun) -> list[FrameTruth]:
@@ -114,7 +128,10 @@ def dynamic_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
         "events_total": recall.total,
         "events_unobservable": recall.unobservable,
         "event_latency_bound_batches": recall.latency_bound_batches,
-        "event_trace": _event_trace(result, assignment, truth, predictions, recall, lenient),
+        **change_kinds(recall, stream.empty_place_batches),
+        "event_trace": _event_trace(
+            result, assignment, truth, predictions, (recall, lenient), stream.empty_place_batches
+        ),
         # False absence: identity-conditioned (`_identity`) is the strict headline, the
         # identity-agnostic one the lenient reading.
         "false_absence": absence.rate,
@@ -129,17 +146,47 @@ def dynamic_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
     }
 
 
+# A memory removes an object after this many visibility-admissible misses at the least
+# (lifecycle.remove_min_visible_misses), one per batch: a removal is judged where it could be.
+MIN_EMPTY_VIEWS = 3
+
+
+def change_kinds(recall: EventRecall, empty_batches: Sequence[int | None]) -> dict[str, int]:
+    """Recall of two kinds of change, strictly read: moves and transfers (observable ones)
+    reflected for the identity the object had before, and removals of objects whose empty place
+    was in view in at least `MIN_EMPTY_VIEWS` batches of the bound, each within the bound."""
+    outcomes = recall.per_event
+    carries = [
+        o
+        for o in outcomes
+        if o.event.type in ("move", "transfer") and o.observable_frame is not None
+    ]
+    counts = empty_batches or (None,) * len(outcomes)
+    seen_empty = [
+        o for o, n in zip(outcomes, counts, strict=True) if n is not None and n >= MIN_EMPTY_VIEWS
+    ]
+    return {
+        "carries_total": len(carries),
+        "carries_recalled_identity": sum(o.within_bound for o in carries),
+        "removals_seen_empty": len(seen_empty),
+        "removals_seen_empty_recalled": sum(o.within_bound for o in seen_empty),
+    }
+
+
 def _event_trace(
     result: MethodRun,
     assignment: Mapping[str, str],
     truth: Sequence[FrameTruth],
     predictions: Sequence[FramePrediction],
-    recall: EventRecall,
-    lenient: EventRecall,
+    readings: tuple[EventRecall, EventRecall],
+    empty_batches: Sequence[int | None],
 ) -> list[dict[str, Any]]:
-    """Per scheduled change: both readings, the tracks they looked at, the track's story."""
+    """Per scheduled change: both readings (strict, lenient), the tracks they looked at, the
+    track's story, and for a removal how many batches showed its empty place."""
+    recall, lenient = readings
+    empty = empty_batches or (None,) * len(recall.per_event)
     trace = []
-    for outcome, loose in zip(recall.per_event, lenient.per_event, strict=True):
+    for outcome, loose, seen_empty in zip(recall.per_event, lenient.per_event, empty, strict=True):
         event = outcome.event
         track = assignment.get(event.object_id)
         before = (
@@ -153,6 +200,7 @@ def _event_trace(
                 "type": event.type,
                 "object": event.object_id,
                 "observable_frame": outcome.observable_frame,
+                "empty_place_batches": seen_empty,
                 "track": track,
                 "identity_before": before,
                 "recalled_frame_identity": outcome.recalled_frame,

@@ -17,6 +17,12 @@ DYNAMIC_FIGURES: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("id_switches", "IDS class-aware (lenient)↓", ("id_switches",)),
     ("event_recall_identity", "Event R.↑", ("events_recalled_identity", "events_total")),
     ("event_recall", "Event R. lenient↑", ("events_recalled", "events_total")),
+    ("carry_recall", "Moves+transfers R.↑", ("carries_recalled_identity", "carries_total")),
+    (
+        "removal_recall_seen_empty",
+        "Removals R. (place seen empty ≥3)↑",
+        ("removals_seen_empty_recalled", "removals_seen_empty"),
+    ),
     (
         "false_absence_identity",
         "False abs.↓",

@@ -99,3 +99,46 @@ def observable_frames(
         else:
             observable.append(_detected(frames, event.object_id, event.frame, stop))
     return tuple(observable)
+
+
+def empty_place_batches(
+    scenario: Scenario,
+    events: Sequence[ScheduledEvent],
+    observable: Sequence[int | None],
+    camera: CameraModel,
+    poses: Sequence[np.ndarray],
+    frames_per_batch: int,
+    real_depth: RealDepth | None = None,
+) -> tuple[int | None, ...]:
+    """Per disappearance: in how many batches of the latency bound (from the batch it became
+    observable in, `scenario.event_latency_batches` on) its empty place was in view as well as
+    `_place_in_view` asks, before the object's next change. A memory removes an object after a
+    number of visibility-admissible misses, one per batch at most: this is how many it could
+    have had. None for other changes and for a disappearance never observable."""
+    timeline = Timeline(scenario)
+    counts: list[int | None] = []
+    for position, (event, first) in enumerate(zip(events, observable, strict=True)):
+        if event.type != "disappear" or first is None:
+            counts.append(None)
+            continue
+        following = [
+            later.frame for later in events[position + 1 :] if later.object_id == event.object_id
+        ]
+        start_batch = first // frames_per_batch
+        stop = min(
+            min(following, default=len(poses)),
+            (start_batch + scenario.event_latency_batches + 1) * frames_per_batch,
+            len(poses),
+        )
+        batches: set[int] = set()
+        frame_index = first
+        while frame_index < stop:
+            shown = _place_in_view(
+                scenario, timeline, camera, poses, real_depth, event.object_id, frame_index, stop
+            )
+            if shown is None:
+                break
+            batches.add(shown // frames_per_batch)
+            frame_index = (shown // frames_per_batch + 1) * frames_per_batch  # the next batch
+        counts.append(len(batches))
+    return tuple(counts)

@@ -8,6 +8,8 @@ import pytest
 
 from core.events import ObjectAdded, TrackConfirmed, TrackMoved, TrackRemoved, TrackReparented
 from evaluation.change_metrics import (
+    EventOutcome,
+    EventRecall,
     class_false_absence,
     event_recall,
     false_absence,
@@ -23,6 +25,7 @@ from evaluation.metrics import (
     presence_f1,
 )
 from evaluation.predictions import FramePrediction, MethodEvent, PredictedNode
+from evaluation.protocols import change_kinds
 from sim.truth import FrameTruth, ScheduledEvent, TruthFixture, TruthObject, Vec3
 
 ORIGIN: Vec3 = (0.0, 0.0, 0.0)
@@ -563,3 +566,28 @@ def test_mean_std_uses_the_sample_deviation() -> None:
     assert mean == 2.5
     assert std == pytest.approx(math.sqrt(5 / 3))
     assert mean_std([0.7]) == (0.7, 0.0)
+
+
+def test_carries_and_removals_seen_empty_are_counted_apart() -> None:
+    def outcome(kind: str, observable: int | None, within: bool) -> EventOutcome:
+        event = ScheduledEvent(frame=10, type=kind, object_id=f"{kind}-{observable}-{within}")
+        recalled = 20 if within else None
+        return EventOutcome(event, observable, recalled, 1 if within else None, within)
+
+    outcomes = [
+        outcome("move", 12, True),
+        outcome("transfer", 12, False),
+        outcome("move", None, False),  # never observable: not judged
+        outcome("disappear", 12, True),  # its place seen empty in 3 batches
+        outcome("disappear", 12, False),  # in 2: not judged
+        outcome("disappear", 12, False),  # in 4, removed late
+        outcome("appear", 12, True),
+    ]
+    recall = EventRecall(3, len(outcomes), 3, 1, outcomes, 10)
+    kinds = change_kinds(recall, (None, None, None, 3, 2, 4, None))
+    assert kinds == {
+        "carries_total": 2,
+        "carries_recalled_identity": 1,
+        "removals_seen_empty": 2,
+        "removals_seen_empty_recalled": 1,
+    }
