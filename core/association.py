@@ -38,6 +38,9 @@ class CandidatePool:
     # established (removed, demoted, or missed where they were). A track still in place, or a
     # retired false positive, never lends its identity to an object seen elsewhere.
     recoverable: npt.NDArray[np.bool_] | None = None
+    # Rows that compete with them without lending (`unrefuted_rivals`): published tracks whose
+    # absence is not established. When one is the best match, the object may be it: no lending.
+    rivals: npt.NDArray[np.bool_] | None = None
 
 
 def appearance_agrees(a: FloatArray | None, b: FloatArray | None, min_cosine: float) -> bool:
@@ -108,34 +111,37 @@ def _fallback(
     the pairing must be unique: one unmatched proposal of the class and one candidate.
     """
     assert pool.recoverable is not None
-    candidates = [
-        i
-        for i in np.flatnonzero(pool.recoverable)
-        if pool.track_ids[int(i)] not in used_tracks
-        and (pool.eligible is None or pool.eligible[int(i)])
-    ]
+
+    def unmatched(mask: npt.NDArray[np.bool_] | None) -> list[int]:
+        if mask is None:
+            return []
+        return [
+            int(i)
+            for i in np.flatnonzero(mask)
+            if pool.track_ids[int(i)] not in used_tracks
+            and (pool.eligible is None or pool.eligible[int(i)])
+        ]
+
+    candidates = unmatched(pool.recoverable)
+    rivals = unmatched(pool.rivals)
     free = [j for j in range(len(proposals)) if j not in matches and j not in pieces]
     recovered: dict[int, str] = {}
     taken: set[int] = set()
     for j in free:
         proposal = proposals[j]
         observed = class_distribution(proposal.label, proposal.class_scores)
-        same_class = [
-            int(i)
-            for i in candidates
-            if int(i) not in taken
-            and pool.kinds[int(i)] == proposal.kind
-            and classes_agree(pool.class_belief_of(int(i)), proposal.label, observed, params)
-        ]
+
+        same_class = _of_class(candidates, proposal, observed, pool, taken, params)
         if not same_class:
             continue
+        unrefuted = _of_class(rivals, proposal, observed, pool, taken, params)
         choice = (
-            _by_appearance(proposal, same_class, pool, params)
+            _by_appearance(proposal, same_class, pool, params, unrefuted)
             if params.fallback_ranks_by_appearance
             else None
         )
         if choice is None:
-            rivals = [
+            rivals_of_proposal = [
                 k
                 for k in free
                 if k != j
@@ -144,7 +150,8 @@ def _fallback(
             ]
             if (
                 len(same_class) != 1
-                or rivals
+                or unrefuted
+                or rivals_of_proposal
                 or not _appearance_allows(proposal, same_class[0], pool, params)
             ):
                 continue
@@ -154,22 +161,45 @@ def _fallback(
     return recovered
 
 
+def _of_class(
+    rows: Sequence[int],
+    proposal: Proposal,
+    observed: Mapping[str, float],
+    pool: CandidatePool,
+    taken: set[int],
+    params: AssociationParams,
+) -> list[int]:
+    """The rows of a class compatible with the proposal's (`observed` its class evidence)."""
+    return [
+        i
+        for i in rows
+        if i not in taken
+        and pool.kinds[i] == proposal.kind
+        and classes_agree(pool.class_belief_of(i), proposal.label, observed, params)
+    ]
+
+
 def _by_appearance(
-    proposal: Proposal, rows: Sequence[int], pool: CandidatePool, params: AssociationParams
+    proposal: Proposal,
+    rows: Sequence[int],
+    pool: CandidatePool,
+    params: AssociationParams,
+    rivals: Sequence[int] = (),
 ) -> int | None:
-    """The row whose appearance passes the gate and beats every other by the margin, if any."""
+    """The row whose appearance passes the gate and beats every other, rivals included, by the
+    margin, if any; None too when a rival is the best match (it may be the object)."""
     if proposal.embedding is None:
         return None
     scored = []
-    for row in rows:
+    for row in (*rows, *rivals):
         embedding = pool.embedding_of(row)
         if embedding is None or embedding.shape != proposal.embedding.shape:
             return None  # one candidate cannot be compared: appearance cannot decide
-        scored.append((float(embedding @ proposal.embedding), row))
+        scored.append((float(embedding @ proposal.embedding), row in rows, row))
     scored.sort(reverse=True)
-    best, row = scored[0]
+    best, lends, row = scored[0]
     runner_up = scored[1][0] if len(scored) > 1 else -1.0
-    if best > params.min_appearance_cosine and best - runner_up >= params.fallback_margin:
+    if lends and best > params.min_appearance_cosine and best - runner_up >= params.fallback_margin:
         return row
     return None
 

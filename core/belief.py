@@ -13,13 +13,14 @@ def update_existence(
     *,
     observed: bool = False,
     confirmed: bool = False,
-    visible_miss: bool = False,
+    visible_miss: float = False,
     rejected: bool = False,
 ) -> float:
     """l_t = l_{t-1} + eta_o O + eta_c K - eta_m U V - eta_r R, clamped to the documented range.
 
     `visible_miss` is U_i^t * V_i(t): an unmatched track that is also visible. An unmatched track
-    that is out of view or occluded is not a visible miss and leaves l unchanged.
+    that is out of view or occluded is not a visible miss and leaves l unchanged. A weight above
+    1 counts a clear view of an empty place for more than a glimpse (`clear_view_miss_weight`).
     """
     updated = (
         logodds

@@ -223,11 +223,13 @@ class FixtureObserved(TrackObserved):
 
 @dataclass(frozen=True, kw_only=True)
 class ObjectReidentified(TrackObserved):
-    """A hypothesis seen elsewhere since this object was last seen is this object.
+    """A track seen elsewhere since this object was last seen is this object.
 
     The unique-class fallback, deferred (section 3.3): a carried object seen at its new place
-    before its old place was seen empty starts a hypothesis, its absence not yet established.
-    Once it is, and appearance singles the pair out, the object takes the hypothesis's place,
+    before its old place was seen empty starts a hypothesis, its absence not yet established,
+    which may be published there before the old place is seen again (the hand-over,
+    `reidentify_published`). Once the absence is established, and appearance singles the pair
+    out, the object takes the hypothesis's place,
     box, class and appearance evidence and support evidence, and one positive update per batch
     the hypothesis was seen in (equation (3)); the hypothesis retires, merged into it.
     """

@@ -208,6 +208,7 @@ def _new_track(event: ObjectAdded | FixtureAdded) -> Track:
         center=first.center,
         extent=first.extent,
         recent_centers=(),
+        first_observed=event.timestamp if isinstance(event, ObjectAdded) else None,
     )
 
 

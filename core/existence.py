@@ -136,9 +136,9 @@ def unchanged(track: Track) -> Existence:
     )
 
 
-def visible_miss(track: Track, params: Params) -> Existence:
-    """An unmatched, observable track: U V = 1 (eta_m), one more visible miss."""
-    logodds = update_existence(track.existence_logodds, params.existence, visible_miss=True)
+def visible_miss(track: Track, params: Params, weight: float = 1.0) -> Existence:
+    """An unmatched, observable track: U V = 1 (eta_m, times `weight`), one more visible miss."""
+    logodds = update_existence(track.existence_logodds, params.existence, visible_miss=weight)
     return Existence(
         logodds,
         logistic(logodds),
@@ -299,8 +299,28 @@ def fixture_sighting(
 
 
 def miss(track: Track, sighting: Sighting, params: Params) -> Miss:
-    """A visible miss, named by the frame that showed the track best."""
-    return Miss(track.track_id, sighting.frame_id, sighting.passed, visible_miss(track, params))
+    """A visible miss, named by the frame that showed the track best; an object's weighted by
+    how clearly that frame showed its place (a fixture's counts once: its views are large)."""
+    weight = miss_weight(sighting, params) if track.kind == "object" else 1.0
+    existence = visible_miss(track, params, weight)
+    return Miss(track.track_id, sighting.frame_id, sighting.passed, existence)
+
+
+def miss_weight(sighting: Sighting, params: Params) -> float:
+    """How much a visible miss counts: 1 (the paper's U V), or with `clear_view_miss_weight`
+    above 1, up to that much for a clear view. The weight grows linearly with the share of the
+    image the observable part of the box covers, times the share of the box inside the image,
+    from 1 at the missed-detection condition's floor to the full weight at
+    `clear_view_image_fraction`: a glimpse of a place may miss a small object, a clear view of it
+    rarely does (detectors find objects worst when small or cut by the border)."""
+    top = params.existence.clear_view_miss_weight
+    if top <= 1.0:
+        return 1.0
+    floor = params.visibility.min_expected_image_fraction
+    clear = params.existence.clear_view_image_fraction
+    shown = sighting.expected_fraction * sighting.in_image_share
+    clarity = min(1.0, max(0.0, (shown - floor) / max(clear - floor, 1e-12)))
+    return 1.0 + (top - 1.0) * clarity
 
 
 def reidentification(

@@ -76,12 +76,17 @@ class TrackColumns:
         self._embeddings: dict[int, FloatArray | None] = {}
         self._beliefs: dict[int, Mapping[str, float]] = {}
 
-    def pool(self, eligible: BoolArray | None, recoverable: BoolArray) -> CandidatePool:
-        """Every track in play; `eligible` and `recoverable` are over the state's rows."""
+    def pool(
+        self, eligible: BoolArray | None, recoverable: BoolArray, rivals: BoolArray | None
+    ) -> CandidatePool:
+        """Every track in play; `eligible`, `recoverable` and `rivals` are over the state's rows
+        (the hypotheses created here are none of the last two)."""
         extra = len(self.ids) - self.count
         if eligible is not None:
             eligible = np.concatenate((eligible, np.ones(extra, dtype=np.bool_)))
         recoverable = np.concatenate((recoverable, np.zeros(extra, dtype=np.bool_)))
+        if rivals is not None:
+            rivals = np.concatenate((rivals, np.zeros(extra, dtype=np.bool_)))
         return CandidatePool(
             self.ids,
             self.kinds,
@@ -90,6 +95,7 @@ class TrackColumns:
             self.embedding_of,
             eligible,
             recoverable,
+            rivals,
         )
 
     def embedding_of(self, row: int) -> FloatArray | None:
@@ -116,11 +122,12 @@ class TrackColumns:
         return self._beliefs[row]
 
     def extent_of(self, track_id: str) -> FloatArray:
-        """A track's size: its visibility box, the union of its views (partial views give
-        partial boxes); one created here: its first proposal's extent."""
+        """A track's size: its latest observed extent, the object's own (not the union box the
+        visibility gate samples, which bleeding masks grow and which would take in a
+        neighbour); one created here: its first proposal's extent."""
         row = self.row[track_id]
         if row < self.count:
-            extent: FloatArray = self.state.arrays.box_extents[row]
+            extent: FloatArray = self.state.arrays.extents[row]
             return extent
         return self.observations[track_id][0].extent
 
@@ -148,7 +155,7 @@ class TrackColumns:
 def associate_frame(
     columns: TrackColumns,
     proposals: Sequence[Proposal],
-    recoverable: BoolArray,
+    lenders: tuple[BoolArray, BoolArray | None],
     eligible: BoolArray | None,
     params: AssociationParams,
     hold_captured: bool,
@@ -161,7 +168,7 @@ def associate_frame(
     """
     matches = associate(
         proposals,
-        columns.pool(eligible, recoverable),
+        columns.pool(eligible, *lenders),
         params,
         partial(fragments, proposals, size_of=columns.extent_of, params=params),
     )
@@ -181,8 +188,8 @@ def associate_capture(
 ) -> list[tuple[int, str]]:
     """The front end on an inspection capture's view: (proposal index, track) of each child."""
     columns = TrackColumns(state, state.next_track_number, params.fusion.class_evidence_from_scores)
-    recoverable = _recoverable(state.arrays, frozenset(), columns, params)
-    return associate_frame(columns, proposals, recoverable, None, params.association, False)
+    lenders = _lenders(state.arrays, frozenset(), columns, params)
+    return associate_frame(columns, proposals, lenders, None, params.association, False)
 
 
 def associate_batch(
@@ -206,8 +213,8 @@ def associate_batch(
     )
     eligible = _eligible(arrays, since, rules.identity_memory_s)
     for frame_proposals, shown in zip(proposals, visibility.shown, strict=True):
-        recoverable = _recoverable(arrays, shown, columns, params)
-        associate_frame(columns, frame_proposals, recoverable, eligible, params.association, True)
+        lenders = _lenders(arrays, shown, columns, params)
+        associate_frame(columns, frame_proposals, lenders, eligible, params.association, True)
     absent = _absent(arrays, visibility.shown[-1], columns, params)
     new_tracks = (*new_fixtures, *columns.new_ids)
     reidentified = _reidentifications(columns, eligible, absent, params.association)
@@ -237,16 +244,23 @@ def _eligible(arrays: TrackArrays, since: float, memory: float | None) -> BoolAr
     return eligible
 
 
-def _recoverable(
+def _lenders(
     arrays: TrackArrays, shown: Collection[str], columns: TrackColumns, params: Params
-) -> BoolArray:
-    """The tracks the unique-class fallback may lend an identity from: ours, published ones
-    whose absence is established; the paper's (`fallback_requires_absence` False), any track
-    (the frame's matches are excluded when it runs)."""
+) -> tuple[BoolArray, BoolArray | None]:
+    """The tracks the unique-class fallback may lend an identity from, and those that compete
+    with them without lending (None: none do).
+
+    Ours: published tracks whose absence is established lend; the other published ones, not
+    removed, compete (`unrefuted_rivals`). The paper's (`fallback_requires_absence` False): any
+    track lends (the frame's matches are excluded when it runs)."""
     if not params.association.fallback_requires_absence:
-        return np.ones(len(arrays.track_ids), dtype=np.bool_)
-    recoverable: BoolArray = arrays.published & _absent(arrays, shown, columns, params)
-    return recoverable
+        return np.ones(len(arrays.track_ids), dtype=np.bool_), None
+    absent = _absent(arrays, shown, columns, params)
+    recoverable: BoolArray = arrays.published & absent
+    if not params.association.unrefuted_rivals:
+        return recoverable, None
+    rivals: BoolArray = arrays.published & ~absent & ~arrays.gone
+    return recoverable, rivals
 
 
 def _absent(
@@ -266,15 +280,17 @@ def _absent(
 def _reidentifications(
     columns: TrackColumns, eligible: BoolArray | None, absent: BoolArray, params: AssociationParams
 ) -> dict[str, tuple[str, float]]:
-    """Missing objects that are hypotheses seen since elsewhere: object -> (hypothesis,
-    appearance cosine).
+    """Missing objects that are tracks seen since elsewhere: object -> (track, appearance
+    cosine).
 
-    The object: published, its absence established, not matched in this batch. The hypothesis:
-    an object track never published, not matched in this batch, last seen after the object
-    was. Their classes are compatible, and each is the other's best appearance match past the
-    gate, by the fallback margin over every other candidate on either side (a mug carried among
-    mugs keeps its identity; a mug still in place lends none). The work is bounded by the live
-    hypotheses, which retire when unseen.
+    The object: published, its absence established, not matched in this batch. The other: an
+    object track not matched in this batch, never published and last seen after the object
+    was, or (`reidentify_published`) published, not itself seen empty, and first seen after
+    the object was last seen. Their classes are compatible, and each is the other's best
+    appearance match past the gate, by the fallback margin over every other candidate on
+    either side, the unrefuted tracks of the class included (`unrefuted_rivals`): a mug carried
+    among mugs keeps its identity; a mug still in place lends none. The work is bounded by the
+    live tracks.
     """
     if not (params.unique_class_fallback and params.reidentify_hypotheses):
         return {}
@@ -286,19 +302,32 @@ def _reidentifications(
         row = columns.row[track_id]
         if row < columns.count:
             objects[row] = False
-    hypotheses = objects & arrays.unpublished_tentative & ~arrays.gone
-    if not hypotheses.any():
+    missing = objects & arrays.published & absent
+    if not missing.any():
         return {}
-    missing = np.flatnonzero(objects & arrays.published & absent)
-    if missing.size == 0:
-        return {}
-    # Only a hypothesis seen after some missing object was can be one of them.
+    objects &= ~arrays.gone
+    unrefuted = objects & arrays.published & ~absent
+    candidates = objects & arrays.unpublished_tentative
+    if params.reidentify_published:
+        candidates |= unrefuted
+    # Only a track seen after some missing object was can be one of them.
     with np.errstate(invalid="ignore"):
-        hypotheses &= arrays.last_observed > np.nanmin(arrays.last_observed[missing])
+        candidates &= arrays.last_observed > np.nanmin(arrays.last_observed[missing])
+    if not candidates.any():
+        return {}
+    tracks = columns.state.tracks
 
     def cosine(h: int, m: int) -> float | None:
-        if not arrays.last_observed[m] < arrays.last_observed[h]:
-            return None  # the hypothesis was not seen after the object
+        if h == m:
+            return None
+        first = tracks[arrays.track_ids[h]].first_observed
+        seen_since = (
+            first is not None and arrays.last_observed[m] < first
+            if arrays.published[h]
+            else arrays.last_observed[m] < arrays.last_observed[h]
+        )
+        if not seen_since:
+            return None  # not seen after the object: two objects, or no evidence of one
         if (
             class_compatibility(columns.class_belief_of(h), columns.class_belief_of(m))
             < params.min_class_compatibility
@@ -307,10 +336,13 @@ def _reidentifications(
         a, b = columns.embedding_of(h), columns.embedding_of(m)
         return None if a is None or b is None or a.shape != b.shape else float(a @ b)
 
-    rows = np.flatnonzero(hypotheses).tolist()
+    rows = np.flatnonzero(candidates).tolist()
+    lenders = np.flatnonzero(missing).tolist()
+    rivals = np.flatnonzero(unrefuted).tolist() if params.unrefuted_rivals else []
     return {
         arrays.track_ids[m]: (arrays.track_ids[h], score)
-        for h, m, score in mutual_matches(rows, missing.tolist(), cosine, params)
+        for h, m, score in mutual_matches(rows, [*lenders, *rivals], cosine, params)
+        if missing[m]
     }
 
 

@@ -106,6 +106,19 @@ class AssociationParams:
     # appearance match past the gate and by the margin (`ObjectReidentified`). Off with the
     # fallback.
     reidentify_hypotheses: bool = True
+    # The hand-over (ours): the re-identification above also takes in a published track, first
+    # seen after the missing object was last seen and not itself seen empty. A carried object
+    # seen at its new place first is published there within two batches, long before its old
+    # place is seen empty; the younger track then retires into the object, which keeps its
+    # identity at the new place (`ObjectReidentified`, then `reparent`). False: only a
+    # never-published hypothesis takes an identity back.
+    reidentify_published: bool = True
+    # Ours: in the fallback and the re-identification, the unrefuted tracks of the class compete
+    # too (published, not removed or demoted, not seen empty as above, not matched in the
+    # frame): an identity is lent only when its track beats every one of them by the margin, and
+    # when one of them wins nothing is lent yet (it may be the object, still in place or not yet
+    # known to be gone). False: only the tracks whose absence is established are compared.
+    unrefuted_rivals: bool = True
     # Not in the paper: detectors over-segment (one mug reported as two masks). A second
     # proposal of a compatible class whose box, joined with the box of a proposal matched in the
     # same frame, stays within this factor of the object's size on every axis is a piece of that
@@ -159,6 +172,15 @@ class ExistenceParams:
     # removed object is confirmed again after 5 positive batches.
     logodds_min: Annotated[float, Field(ge=-MAX_LOGODDS, le=MAX_LOGODDS)] = -4.0
     logodds_max: Annotated[float, Field(ge=-MAX_LOGODDS, le=MAX_LOGODDS)] = 1.5
+    # Ours (`clear_view_misses`): a visible miss counts up to this many times eta_m, by how
+    # clearly the view showed the place (`core.existence.miss_weight`); 1 is the paper's U V.
+    # Removal from the clamp's top then takes 3 clear misses ((1.5 + 1.99) / 1.4), one pass of
+    # the route by the place (a pass brings two or three admissible views), instead of 5, and a
+    # glimpse still counts once. Clear from `clear_view_image_fraction` on: 1,024 pixels at
+    # 640 x 480, COCO's smallest "medium" object (32 x 32), the size from which detectors
+    # rarely miss one.
+    clear_view_miss_weight: Annotated[float, Field(ge=1.0, le=10.0)] = 2.0
+    clear_view_image_fraction: Fraction = 0.0033
 
     def __post_init__(self) -> None:
         if not self.logodds_min <= self.prior_logodds <= self.logodds_max:
@@ -273,12 +295,18 @@ class FixtureParams:
 
     __pydantic_config__ = _CHECKED
     taxonomy: Labels = ("table", "desk", "counter", "bed", "shelf", "cabinet", "sofa")
-    # Only these classes enter the inspection queue Q_t (section 3.4, T_insp).
+    # Only these classes enter the inspection queue Q_t (section 3.4, T_insp; the paper leaves
+    # the set to the task). Every class of the taxonomy above holds small objects in a home (a
+    # phone on a nightstand, which is a cabinet; glasses on a bed; a remote on a sofa), so all
+    # are inspected; a task that tracks only kitchenware may name fewer.
     inspection_taxonomy: Annotated[tuple[Label, ...], Field(max_length=64)] = (
         "table",
         "desk",
         "counter",
+        "bed",
         "shelf",
+        "cabinet",
+        "sofa",
     )
     # At least 2 cm: finer voxels would let one fixture mask cover millions of them.
     voxel_size_m: Annotated[float, Field(ge=0.02, le=1.0)] = 0.05

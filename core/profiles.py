@@ -129,6 +129,28 @@ EXTENSIONS: tuple[Extension, ...] = (
         "a carried mug among other mugs",
     ),
     Extension(
+        "clear_view_misses",
+        "a clear view of an empty place counts for more than a glimpse",
+        "3.3 visibility-gated existence (equation (3))",
+        {"existence": {"clear_view_miss_weight": 1.0}},
+        "an object taken away, its place seen clearly in one pass of the route",
+    ),
+    Extension(
+        "identity_handover",
+        "a published younger track hands a missing identity back",
+        "3.3 type-specific association (unique-class fallback)",
+        {"association": {"reidentify_published": False}},
+        "a carried object seen at its new place first, and published there, before its old "
+        "place is seen empty",
+    ),
+    Extension(
+        "unrefuted_rivals",
+        "unrefuted tracks of the class compete in the fallback",
+        "3.3 type-specific association (unique-class fallback)",
+        {"association": {"unrefuted_rivals": False}},
+        "two mugs: one taken away, the other carried far while its own track still stands",
+    ),
+    Extension(
         "soft_class_agreement",
         "class agreement from the detector's scores",
         "3.3 type-specific association (class agreement)",

@@ -21,7 +21,7 @@ from core.values import InspectionStatus, LifecycleState, TrackKind, Vec3, Verif
 # 4: the occupancy map, the scene clock and the inspection plan; 5: fine nodes of captures;
 # 6: the params hold the extensions' switches (core/profiles.py), so a state written before
 # them is encoded differently (a snapshot of it is replayed instead, a rebuild rewrites it)
-SNAPSHOT_FORMAT_VERSION = 6
+SNAPSHOT_FORMAT_VERSION = 7
 
 
 def _none(value: object) -> bool:
@@ -71,6 +71,9 @@ class Track:
     # keyframes neither update it nor count misses against it; a later capture of its fixture
     # does both. Removal releases it to the front end.
     capture_id: Annotated[str | None, Field(exclude_if=_none)] = None
+    # Objects: when the track was first observed (its `add`). A track first seen after another
+    # was last seen may be that object seen elsewhere; one seen while the other still was is not.
+    first_observed: Annotated[float | None, Field(exclude_if=_none)] = None
 
     def evolved(self, **changes: Unpack[TrackChanges]) -> Track:
         """A copy with `changes` (what dataclasses.replace does, without its per-field cost).
@@ -154,6 +157,7 @@ class Track:
             "inspection_attempts": self.inspection_attempts,
             "box": None if self.box is None else list(self.box),
             **({} if self.capture_id is None else {"capture_id": self.capture_id}),
+            **({} if self.first_observed is None else {"first_observed": self.first_observed}),
         }
 
     @classmethod
@@ -176,6 +180,7 @@ class Track:
             published_center=None if published is None else tuple(published),
             box=None if record["box"] is None else tuple(record["box"]),
             capture_id=record.get("capture_id"),
+            first_observed=record.get("first_observed"),
         )
         if values.keys() != _TRACK_FIELDS:
             raise ValueError(f"track record fields differ: {sorted(values.keys() ^ _TRACK_FIELDS)}")
@@ -212,6 +217,7 @@ class TrackChanges(TypedDict, total=False):
     inspection_attempts: int
     box: tuple[float, ...] | None
     capture_id: str | None
+    first_observed: float | None
 
 
 _TRACK_FIELDS = frozenset(f.name for f in fields(Track))

@@ -84,12 +84,17 @@ def only_known_keys(value: Any, like: Any) -> Any:
 
 def laid_out_as(state: dict[str, Any], golden: dict[str, Any]) -> dict[str, Any]:
     """A state's JSON as the golden state lays it out: the voxel map digested, the parameters
-    added since (switches whose defaults keep the old rules) and the format version (a cache's
-    layout) set aside; every other byte as the state has it."""
+    added since (switches whose defaults keep the old rules), the tracks' fields added since
+    (their first observation time) and the format version (a cache's layout) set aside; every
+    other byte as the state has it."""
     return {
         **voxels_digested(state),
         "format_version": golden["format_version"],
         "params": only_known_keys(state["params"], golden["params"]),
+        "tracks": [
+            {key: value for key, value in track.items() if key != "first_observed"}
+            for track in state["tracks"]
+        ],
     }
 
 

@@ -147,8 +147,11 @@ def frame(
     frame_id: str,
     scores: Mapping[str, Mapping[str, float]] = SCORES,
     objects: bool = True,
+    embeddings: Mapping[str, np.ndarray] | None = None,
+    t: float = 0.0,
 ) -> Frame:
-    """A rendered frame with fixture masks (class scores) and object masks."""
+    """A rendered frame at time `t` with fixture masks (class scores) and object masks (with
+    the appearance `embeddings` gives an object by its id)."""
     pose = look_at(eye, target)
     view = render(world, CAMERA, pose)
     detections = []
@@ -166,8 +169,11 @@ def frame(
         for index, box in enumerate(world.objects):
             mask = view.instance == index
             if mask.sum() >= 30:
-                detections.append(Detection(box.label, 0.9, "object", Mask.from_array(mask), None))
-    return Frame(frame_id, 0.0, INTRINSICS, pose, view.depth.astype(np.float32), tuple(detections))
+                embedding = None if embeddings is None else embeddings.get(box.id)
+                detections.append(
+                    Detection(box.label, 0.9, "object", Mask.from_array(mask), embedding)
+                )
+    return Frame(frame_id, t, INTRINSICS, pose, view.depth.astype(np.float32), tuple(detections))
 
 
 def batches(
@@ -176,9 +182,25 @@ def batches(
     prefix: str,
     scores: Mapping[str, Mapping[str, float]] = SCORES,
     objects: bool = True,
+    embeddings: Mapping[str, np.ndarray] | None = None,
+    t0: float | None = None,
 ) -> list[Batch]:
-    """One single-frame batch per viewpoint."""
+    """One single-frame batch per viewpoint: at time 0, or with `t0` a second apart from it."""
     return [
-        Batch(f"{prefix}{i}", (frame(world, eye, target, f"{prefix}{i}", scores, objects),))
+        Batch(
+            f"{prefix}{i}",
+            (
+                frame(
+                    world,
+                    eye,
+                    target,
+                    f"{prefix}{i}",
+                    scores,
+                    objects,
+                    embeddings,
+                    0.0 if t0 is None else t0 + i,
+                ),
+            ),
+        )
         for i, (eye, target) in enumerate(views)
     ]

@@ -7,6 +7,8 @@ import numpy as np
 from core.association import fragments
 from core.geometry import Proposal
 from core.params import AssociationParams
+from core.state import SceneState
+from tests.core.scenes import run_log, scene_batch, track_events
 
 
 def proposal(
@@ -36,3 +38,17 @@ def test_two_slim_objects_side_by_side_are_two_objects() -> None:
     # Stacked upright pieces of one bottle (its top and bottom halves) stay one object.
     top = proposal("bottle", (1.0, 2.0, 0.96), (0.07, 0.06, 0.12), 450)
     assert fragments([left, top], {0: "trk-1"}, lambda _: size, AssociationParams()) == {1}
+
+
+def test_a_mug_beside_one_whose_union_box_grew_is_a_new_object_not_a_piece() -> None:
+    # A mug nudged along the wall in steps under the move threshold: its union box (what the
+    # visibility gate samples) spans 0.4 m, the mug itself 0.1 m. A second mug 0.35 m from it
+    # is sized against the mug, not the grown box: a new hypothesis.
+    state = SceneState()
+    for i, x in enumerate((0.0, 0.08, 0.16, 0.24, 0.3)):
+        state, _ = run_log(state, [scene_batch(f"n{i}", {"mug_1": ((x, 0.1, 2.0), 0.1)}, t=i)])
+    (track,) = state.tracks.values()
+    assert track.box is not None and track.box[3] - track.box[0] > 0.35
+    both = {"mug_1": ((0.3, 0.1, 2.0), 0.1), "mug_2": ((-0.05, 0.1, 2.0), 0.1)}
+    _, log = run_log(state, [scene_batch("two", both, t=5.0)])
+    assert [e.type for e in track_events(log)].count("add") == 1

@@ -28,6 +28,8 @@ from core.values import LifecycleState, TrackKind
 from core.visibility import Sighting
 
 PARAMS = Params()
+# Equation (3) as the paper writes it: every visible miss counts eta_m once.
+UNWEIGHTED = Params.from_dict({"existence": {"clear_view_miss_weight": 1.0}})
 P_ONE_SIGHTING = 0.7310585786300049  # logistic(0 + 1.0): the prior and one observation
 
 
@@ -129,7 +131,7 @@ def test_a_visible_miss_demotes_below_0_30() -> None:
     # l = -0.6 (p 0.3543), 2 misses; one more: l = -0.6 - 0.7 = -1.3, p = 0.2142 < 0.30: demote;
     # 3 misses but p 0.2142 > 0.12: not removed.
     subject = track("confirmed", -0.6, misses=2)
-    decision = miss_decision(subject, miss(subject, missed(subject), PARAMS), PARAMS)
+    decision = miss_decision(subject, miss(subject, missed(subject), UNWEIGHTED), UNWEIGHTED)
     assert decision.demote is not None
     assert decision.demote.p_exist == pytest.approx(0.2141650169574414, abs=1e-12)
     assert decision.remove is None
@@ -139,11 +141,28 @@ def test_a_visible_miss_demotes_below_0_30() -> None:
 def test_a_visible_miss_removes_at_0_12_after_three() -> None:
     # l = -1.3, 4 misses; one more: l = -2.0, p = 0.1192 <= 0.12, 5 misses >= 3: removed.
     subject = track("demoted", -1.3, misses=4)
-    decision = miss_decision(subject, miss(subject, missed(subject), PARAMS), PARAMS)
+    decision = miss_decision(subject, miss(subject, missed(subject), UNWEIGHTED), UNWEIGHTED)
     assert decision.demote is None  # demoted already
     assert decision.remove is not None
     assert decision.remove.p_exist == pytest.approx(0.11920292202211755, abs=1e-12)
     assert decision.remove.visible_misses == 5
+
+
+def test_a_clear_view_of_an_empty_place_counts_twice_a_glimpse_once() -> None:
+    # From l = 1.5: a clear view (the box covers 10% of the image) subtracts 2 x 0.7; a view
+    # at the missed-detection floor (0.05%) 0.7; halfway between floor and clear (0.19%), 1.05.
+    subject = track("confirmed", 1.5)
+    for fraction, logodds in ((0.1, 0.1), (0.0005, 0.8), ((0.0005 + 0.0033) / 2, 0.45)):
+        sighting = Sighting(passed=20, expected_fraction=fraction, frame_id="f")
+        assert miss(subject, sighting, PARAMS).existence.logodds == pytest.approx(logodds)
+    # Half the box outside the image halves what the view shows.
+    cut = Sighting(passed=20, expected_fraction=0.0066, in_image_share=0.5, frame_id="f")
+    assert miss(subject, cut, PARAMS).existence.logodds == pytest.approx(0.1)
+    # A fixture's miss counts once, as does every miss with the weight at 1 (the paper's).
+    fixture = track("confirmed", 1.5, kind="fixture")
+    clear = Sighting(passed=20, expected_fraction=0.1, frame_id="f")
+    assert miss(fixture, clear, PARAMS).existence.logodds == pytest.approx(0.8)
+    assert miss(subject, clear, UNWEIGHTED).existence.logodds == pytest.approx(0.8)
 
 
 def test_pinned_fixtures_and_append_only_memories_keep_their_nodes() -> None:

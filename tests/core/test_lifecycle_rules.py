@@ -252,7 +252,9 @@ def test_removed_track_regains_identity_on_reassociation() -> None:
 
 
 def test_clamp_keeps_a_long_seen_object_removable() -> None:
-    state, _ = run(SceneState(), [scene_batch(f"b{i}", MUG) for i in range(60)])
+    # Every miss counted once (equation (3) as the paper writes it).
+    unweighted = Params.from_dict({"existence": {"clear_view_miss_weight": 1.0}})
+    state, _ = run(SceneState(params=unweighted), [scene_batch(f"b{i}", MUG) for i in range(60)])
     assert state.tracks["trk-000001"].existence_logodds == state.params.existence.logodds_max
     state, per_batch = run(state, [scene_batch(f"m{i}", EMPTY) for i in range(15)])
     removal_batch = next(i for i, events in enumerate(per_batch) if "remove" in types(events))

@@ -22,6 +22,7 @@ from core.profiles import DEFAULT_PROFILE, EXTENDED, EXTENSIONS, PAPER, PROFILES
 from core.state import SceneState
 from core.support import SupportSurface, support_of
 from core.visibility import observable, samples_passed
+from tests.core import handover_scenes
 from tests.core.carried_mugs import SAME_AS_A, carried
 from tests.core.fixture_scenes import fixtures_of, with_second_table, with_twin_of_another_class
 from tests.core.fixture_scenes import run as run_fixtures
@@ -212,6 +213,29 @@ def published_parent(params: Params) -> object:
     return support_of((0.1, 0.1, 0.8), 0.75, surfaces, params.fixtures)
 
 
+def clear_view_misses(params: Params) -> object:
+    # A box seen clearly (about 180 pixels of the 160 x 120 view), confirmed, then taken away:
+    # how many views of its empty place until it is removed.
+    box = {"box_1": ((0.2, 0.1, 2.0), 0.2)}
+    state, _ = run(SceneState(params=params), [scene_batch(f"b{i}", box, t=i) for i in range(4)])
+    for miss in range(1, 10):
+        events = decide(state, scene_batch(f"e{miss}", {}, t=10.0 + miss))
+        if "remove" in [e.type for e in events]:
+            return miss
+        state = fold(state, events)
+    return None
+
+
+def identity_handover(params: Params) -> object:
+    state, mug, _ = handover_scenes.carried(params, counter_first=True)
+    return state.tracks[mug].parent == "trk-000003"  # the counter
+
+
+def unrefuted_rivals(params: Params) -> object:
+    state, first = handover_scenes.two_mugs(params)
+    return state.tracks[first["mug_2"]].lifecycle
+
+
 # name -> (witness, outcome with the extension on, outcome with it off)
 WITNESSES: dict[str, tuple[Outcome, object, object]] = {
     "fragment_rule": (fragment_rule, 0, 1),
@@ -222,6 +246,9 @@ WITNESSES: dict[str, tuple[Outcome, object, object]] = {
     "deferred_reidentification": (deferred_reidentification, True, False),
     "fallback_absence": (fallback_absence, ["trk-000001", "trk-000002"], ["trk-000001"]),
     "fallback_ranking": (fallback_ranking, "trk-000001", None),
+    "clear_view_misses": (clear_view_misses, 3, 5),
+    "identity_handover": (identity_handover, True, False),
+    "unrefuted_rivals": (unrefuted_rivals, "removed", "confirmed"),
     "soft_class_agreement": (soft_class_agreement, ["update"], ["add"]),
     "score_class_evidence": (score_class_evidence, 0.429, 0.0),
     "logodds_clamp": (logodds_clamp, 1.5, 5.0),
