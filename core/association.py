@@ -204,29 +204,6 @@ def _by_appearance(
     return None
 
 
-def mutual_matches(
-    rows: Sequence[int],
-    columns: Sequence[int],
-    score: Callable[[int, int], float | None],
-    params: AssociationParams,
-) -> list[tuple[int, int, float]]:
-    """Pairs (row, column, score) that are each other's best appearance match: past the gate,
-    and by the fallback margin over every other scored pair of either (None: not comparable)."""
-    scores = np.full((len(rows), len(columns)), -1.0)
-    for i, row in enumerate(rows):
-        for j, column in enumerate(columns):
-            value = score(row, column)
-            if value is not None:
-                scores[i, j] = value
-    pairs = []
-    for i, j in zip(*np.nonzero(scores > params.min_appearance_cosine), strict=True):
-        best = float(scores[i, j])
-        rivals = np.concatenate((np.delete(scores[i], j), np.delete(scores[:, j], i)))
-        if rivals.size == 0 or best - float(rivals.max()) >= params.fallback_margin:
-            pairs.append((rows[i], columns[j], best))
-    return pairs
-
-
 def _appearance_allows(
     proposal: Proposal, row: int, pool: CandidatePool, params: AssociationParams
 ) -> bool:

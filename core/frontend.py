@@ -26,13 +26,13 @@ from core.association import (
     appearance_agrees,
     associate,
     fragments,
-    mutual_matches,
 )
 from core.belief import class_compatibility, class_distribution
 from core.fixture_step import FixtureBatch
 from core.fixtures import FixtureProposal
 from core.geometry import Proposal
 from core.params import AssociationParams, Params
+from core.reidentification import reidentifications
 from core.rules import UpdateRules
 from core.state import SceneState, TrackArrays
 from core.visibility import BatchVisibility
@@ -217,7 +217,7 @@ def associate_batch(
         associate_frame(columns, frame_proposals, lenders, eligible, params.association, True)
     absent = _absent(arrays, visibility.shown[-1], columns, params)
     new_tracks = (*new_fixtures, *columns.new_ids)
-    reidentified = _reidentifications(columns, eligible, absent, params.association)
+    reidentified = reidentifications(columns, eligible, absent, params.association)
     return BatchAssociation(
         observations={t: tuple(p) for t, p in columns.observations.items()},
         fixtures={
@@ -275,75 +275,6 @@ def _absent(
     misses = arrays.visible_misses + seen_empty
     absent: BoolArray = arrays.missing | (misses >= params.association.fallback_min_misses)
     return absent
-
-
-def _reidentifications(
-    columns: TrackColumns, eligible: BoolArray | None, absent: BoolArray, params: AssociationParams
-) -> dict[str, tuple[str, float]]:
-    """Missing objects that are tracks seen since elsewhere: object -> (track, appearance
-    cosine).
-
-    The object: published, its absence established, not matched in this batch. The other: an
-    object track not matched in this batch, never published and last seen after the object
-    was, or (`reidentify_published`) published, not itself seen empty, and first seen after
-    the object was last seen. Their classes are compatible, and each is the other's best
-    appearance match past the gate, by the fallback margin over every other candidate on
-    either side, the unrefuted tracks of the class included (`unrefuted_rivals`): a mug carried
-    among mugs keeps its identity; a mug still in place lends none. The work is bounded by the
-    live tracks.
-    """
-    if not (params.unique_class_fallback and params.reidentify_hypotheses):
-        return {}
-    arrays = columns.state.arrays
-    objects = (np.asarray(arrays.kinds) == "object") & ~arrays.captured
-    if eligible is not None:
-        objects &= eligible
-    for track_id in columns.observations:
-        row = columns.row[track_id]
-        if row < columns.count:
-            objects[row] = False
-    missing = objects & arrays.published & absent
-    if not missing.any():
-        return {}
-    objects &= ~arrays.gone
-    unrefuted = objects & arrays.published & ~absent
-    candidates = objects & arrays.unpublished_tentative
-    if params.reidentify_published:
-        candidates |= unrefuted
-    # Only a track seen after some missing object was can be one of them.
-    with np.errstate(invalid="ignore"):
-        candidates &= arrays.last_observed > np.nanmin(arrays.last_observed[missing])
-    if not candidates.any():
-        return {}
-    tracks = columns.state.tracks
-
-    def cosine(h: int, m: int) -> float | None:
-        if h == m:
-            return None
-        first = tracks[arrays.track_ids[h]].first_observed
-        seen_since = (
-            first is not None and arrays.last_observed[m] < first
-            if arrays.published[h]
-            else arrays.last_observed[m] < arrays.last_observed[h]
-        )
-        if not seen_since:
-            return None  # not seen after the object: two objects, or no evidence of one
-        if (
-            class_compatibility(columns.class_belief_of(h), columns.class_belief_of(m))
-            < params.min_class_compatibility
-        ):
-            return None
-        a, b = columns.embedding_of(h), columns.embedding_of(m)
-        return None if a is None or b is None or a.shape != b.shape else float(a @ b)
-
-    rows = np.flatnonzero(candidates).tolist()
-    lenders = np.flatnonzero(missing).tolist()
-    rivals = np.flatnonzero(unrefuted).tolist() if params.unrefuted_rivals else []
-    return {
-        arrays.track_ids[m]: (arrays.track_ids[h], score)
-        for h, m, score in mutual_matches(rows, [*lenders, *rivals], cosine, params)
-        if missing[m]
-    }
 
 
 def second_tracks(
