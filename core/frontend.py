@@ -32,7 +32,7 @@ from core.fixture_step import FixtureBatch
 from core.fixtures import FixtureProposal
 from core.geometry import Proposal
 from core.params import AssociationParams, Params
-from core.reidentification import reidentifications
+from core.reidentification import claimed_hypotheses, reidentifications
 from core.rules import UpdateRules
 from core.state import SceneState, TrackArrays
 from core.visibility import BatchVisibility
@@ -51,6 +51,9 @@ class BatchAssociation:
     merged_fixtures: Mapping[str, str]  # a second fixture track -> the one it joins
     reidentified: Mapping[str, tuple[str, float]]  # missing object -> (hypothesis, cosine)
     duplicates: Mapping[str, str]  # a second object track -> the one it joins
+    # Hypotheses whose publication waits: they may be a published object carried here
+    # (`core.reidentification.claimed_hypotheses`).
+    held: frozenset[str]
     # Tracks the batch settles apart from sightings and misses: its new hypotheses, second
     # fixture tracks merged away, and both sides of each re-identification.
     settled: frozenset[str]
@@ -228,6 +231,7 @@ def associate_batch(
         merged_fixtures=fixtures.merged,
         reidentified=reidentified,
         duplicates=second_tracks(columns, columns.observations, eligible, params.association),
+        held=claimed_hypotheses(columns, eligible, absent, params.association),
         settled=frozenset(
             (*new_tracks, *fixtures.merged, *reidentified, *(h for h, _ in reidentified.values()))
         ),

@@ -135,7 +135,7 @@ def lifecycle_decisions(
     by id (a hypothesis removed before it was ever published, or left unseen too long, retires),
     then re-identifications (the hypothesis retires into the object), then merges."""
     tracks = state.tracks
-    decisions = [update_decision(None, update, params) for update in updates.new]
+    decisions = [_unless_held(update_decision(None, u, params), association) for u in updates.new]
     sighted = {*association.observations, *association.fixtures}
     stale = stale_hypotheses(state, sighted, timestamp, params)
     skipped = association.settled
@@ -145,7 +145,7 @@ def lifecycle_decisions(
         decision = (
             TrackDecision(track_id, None, track.lifecycle)
             if update is None
-            else update_decision(track, update, params, removal=removal)
+            else _unless_held(update_decision(track, update, params, removal=removal), association)
         )
         if decision.remove is not None and track.published_center is None:
             retire = Retirement("removed", last_frame, track.last_observed)
@@ -164,6 +164,13 @@ def lifecycle_decisions(
         decisions.append(update_decision(tracks[reidentified.track_id], reidentified, params))
         decisions.append(_merged(hypothesis, reidentified.track_id, last_frame))
     return (*decisions, *_merges(state, association, decisions, last_frame))
+
+
+def _unless_held(decision: TrackDecision, association: BatchAssociation) -> TrackDecision:
+    """A held hypothesis (`BatchAssociation.held`) is not published in this batch."""
+    if decision.publish is None or decision.track_id not in association.held:
+        return decision
+    return replace(decision, publish=None)
 
 
 def _merges(

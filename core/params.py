@@ -119,6 +119,14 @@ class AssociationParams:
     # when one of them wins nothing is lent yet (it may be the object, still in place or not yet
     # known to be gone). False: only the tracks whose absence is established are compared.
     unrefuted_rivals: bool = True
+    # Ours (`claimed_hypotheses`): a hypothesis whose appearance matches, past the gate, a
+    # published object of a compatible class last seen before it (missing, or unrefuted and not
+    # seen in this batch) is not published yet: it may be that object, carried here. Published,
+    # it would take a second identity, and handing the old one back later is a second switch.
+    # It waits until that object is seen elsewhere (then they are two), its absence is
+    # established (then the hypothesis takes its identity back), or it has been seen in this
+    # many batches (then it is published as a new object). 0: published as the paper says.
+    claimed_hold_max_batches: Annotated[int, Field(ge=0, le=1000)] = 8
     # Not in the paper: detectors over-segment (one mug reported as two masks). A second
     # proposal of a compatible class whose box, joined with the box of a proposal matched in the
     # same frame, stays within this factor of the object's size on every axis is a piece of that

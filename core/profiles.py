@@ -129,6 +129,13 @@ EXTENSIONS: tuple[Extension, ...] = (
         "a carried mug among other mugs",
     ),
     Extension(
+        "claimed_hypotheses",
+        "a hypothesis that may be a known object waits to be published",
+        "3.3 lifecycle transitions (confirm)",
+        {"association": {"claimed_hold_max_batches": 0}},
+        "a carried object seen at its new place before its old place is seen empty",
+    ),
+    Extension(
         "clear_view_misses",
         "a clear view of an empty place counts for more than a glimpse",
         "3.3 visibility-gated existence (equation (3))",

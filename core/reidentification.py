@@ -86,14 +86,54 @@ def reidentifications(
     return found
 
 
+def claimed_hypotheses(
+    columns: TrackColumns, eligible: BoolArray | None, absent: BoolArray, params: AssociationParams
+) -> frozenset[str]:
+    """The hypotheses this batch sighted whose publication waits (`claimed_hold_max_batches`):
+    never published, seen in at most that many batches, and matching past the appearance gate
+    a published object of a compatible class last seen before them, missing or unrefuted, that
+    this batch did not see."""
+    limit = params.claimed_hold_max_batches
+    if limit <= 0 or not params.unique_class_fallback:
+        return frozenset()
+    state, arrays = columns.state, columns.state.arrays
+    hypotheses = []
+    for track_id in columns.observations:
+        row = columns.row[track_id]
+        old = row < columns.count
+        if old and not arrays.unpublished_tentative[row]:
+            continue
+        if (state.tracks[track_id].batches_observed if old else 0) + 1 <= limit:
+            hypotheses.append(row)
+    if not hypotheses:
+        return frozenset()
+    claimants = (np.asarray(arrays.kinds) == "object") & ~arrays.captured & arrays.published
+    claimants &= absent | ~arrays.gone  # a removed object still claims; a rejected one does not
+    if eligible is not None:
+        claimants &= eligible
+    for track_id in columns.observations:
+        row = columns.row[track_id]
+        if row < columns.count:
+            claimants[row] = False
+    rows = np.asarray(hypotheses, dtype=np.intp)
+    scores = _scores(columns, rows, np.flatnonzero(claimants), params)
+    claimed = (scores > params.min_appearance_cosine).any(axis=1)
+    return frozenset(columns.ids[row] for row in rows[claimed].tolist())
+
+
 def _seen_since(columns: TrackColumns, rows: Rows) -> FloatArray:
     """When each candidate was seen, as the time condition reads it: a published track's first
-    observation (one seen while the object still was is another object), a hypothesis's last."""
+    observation (one seen while the object still was is another object), a hypothesis's last;
+    one created in this batch, now (after every track of the state)."""
     arrays, tracks = columns.state.arrays, columns.state.tracks
+    since = np.full(rows.size, np.inf)
+    old = rows < columns.count
+    known = rows[old]
     first = np.array(
-        [tracks[arrays.track_ids[row]].first_observed for row in rows.tolist()], dtype=np.float64
+        [tracks[arrays.track_ids[row]].first_observed for row in known.tolist()], dtype=np.float64
     )
-    return np.where(arrays.published[rows], first, arrays.last_observed[rows])
+    since[old] = np.where(arrays.published[known], first, arrays.last_observed[known])
+    return since
 
 
 def _scores(

@@ -52,17 +52,21 @@ def mugs(state: SceneState) -> list[Track]:
     return [t for t in state.tracks.values() if t.label == "mug"]
 
 
-def carried(params: Params, counter_first: bool) -> tuple[SceneState, str, list[Event]]:
+def carried(
+    params: Params, counter_first: bool, counter_views: int = 2
+) -> tuple[SceneState, str, list[Event]]:
     """The only mug, confirmed on the table, carried to the counter. The robot views the counter
-    twice, then the table (the mug gone) twice, then the counter once more; or the table first,
-    then the counter. Returns the state, the mug's first identity and the whole log."""
+    twice (or `counter_views` times), then the table (the mug gone) twice, then the counter once
+    more; or the table first, then the counter. Returns the state, the mug's first identity and
+    the whole log."""
     embeddings = {"mug": MUG_1}
     state, log = settled(ROOM, embeddings, params)
     (mug,) = mugs(state)
     moved = ROOM.moved("mug", ON_COUNTER)
-    counter = batches(moved, COUNTER_VIEWS[:2], "c", embeddings=embeddings, t0=20.0)
-    table = batches(moved, TABLE_VIEWS[:2], "t", embeddings=embeddings, t0=30.0)
-    again = batches(moved, COUNTER_VIEWS[2:], "k", embeddings=embeddings, t0=40.0)
+    views = (COUNTER_VIEWS[:2] * counter_views)[:counter_views]
+    counter = batches(moved, views, "c", embeddings=embeddings, t0=20.0)
+    table = batches(moved, TABLE_VIEWS[:2], "t", embeddings=embeddings, t0=40.0)
+    again = batches(moved, COUNTER_VIEWS[2:], "k", embeddings=embeddings, t0=50.0)
     order = counter + table + again if counter_first else table + counter + again
     state, more = run_log(state, order)
     return state, mug.track_id, log + more

@@ -8,7 +8,7 @@ import orjson
 import pytest
 
 from core.event_records import event_from_record, event_to_record
-from core.events import ObjectReidentified, TrackReparented, TrackRetired
+from core.events import ObjectReidentified, TrackConfirmed, TrackReparented, TrackRetired
 from core.evolve import fold
 from core.params import Params
 from core.profiles import EXTENDED, extension_named
@@ -16,6 +16,7 @@ from core.state import SceneState
 from tests.core.handover_scenes import carried, mugs, two_mugs
 
 WITHOUT_HANDOVER = Params.from_dict(EXTENDED.without(extension_named("identity_handover")))
+WITHOUT_HOLD = Params.from_dict(EXTENDED.without(extension_named("claimed_hypotheses")))
 WITHOUT_RIVALS = Params.from_dict(EXTENDED.without(extension_named("unrefuted_rivals")))
 
 
@@ -53,8 +54,27 @@ def test_a_carried_mug_keeps_its_identity_on_the_counter_whichever_place_is_seen
     assert replayed.to_dict() == state.to_dict()
 
 
-def test_without_the_handover_the_mug_seen_on_the_counter_first_gets_a_new_identity() -> None:
-    state, mug, _ = carried(WITHOUT_HANDOVER, counter_first=True)
+def test_a_mug_seen_on_the_counter_first_is_held_back_not_published_as_a_second_mug() -> None:
+    # It matches the mug whose table was not yet seen empty: it is not published under a new
+    # identity (which handing the old one back would make a second switch).
+    _, _, log = carried(Params(), counter_first=True)
+    (handover,) = (e for e in log if isinstance(e, ObjectReidentified))
+    assert not any(isinstance(e, TrackConfirmed) and e.track_id == handover.hypothesis for e in log)
+    # Without the hold it is published, then retires into the mug.
+    _, _, log = carried(WITHOUT_HOLD, counter_first=True)
+    (handover,) = (e for e in log if isinstance(e, ObjectReidentified))
+    assert any(isinstance(e, TrackConfirmed) and e.track_id == handover.hypothesis for e in log)
+
+
+def test_a_mug_published_on_the_counter_first_hands_the_identity_back_once_the_table_is_empty() -> (
+    None
+):
+    # Seen there in 10 batches, past the hold, the younger track is published; once the table is
+    # seen empty it retires into the mug.
+    state, mug, _ = carried(Params(), counter_first=True, counter_views=10)
+    assert standing(state) == [(mug, counter_of(state))]
+    # Without the hand-over the mug on the counter keeps the new identity.
+    state, mug, _ = carried(WITHOUT_HANDOVER, counter_first=True, counter_views=10)
     (other,) = (track_id for track_id, parent in standing(state) if track_id != mug)
     assert state.tracks[other].parent == counter_of(state)
     assert not any(t.lifecycle == "retired" for t in mugs(state))

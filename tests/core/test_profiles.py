@@ -12,7 +12,7 @@ import pytest
 
 from core.association import CandidatePool, associate
 from core.decide import decide
-from core.events import ObjectReidentified, TrackRetired
+from core.events import ObjectReidentified, TrackConfirmed, TrackRetired
 from core.evolve import fold
 from core.fixture_association import compatible
 from core.fixtures import FixtureProposal
@@ -227,8 +227,14 @@ def clear_view_misses(params: Params) -> object:
 
 
 def identity_handover(params: Params) -> object:
-    state, mug, _ = handover_scenes.carried(params, counter_first=True)
+    # The counter seen 10 times first: the younger track is published there before the table.
+    state, mug, _ = handover_scenes.carried(params, counter_first=True, counter_views=10)
     return state.tracks[mug].parent == "trk-000003"  # the counter
+
+
+def claimed_hypotheses(params: Params) -> object:
+    _, mug, log = handover_scenes.carried(params, counter_first=True)
+    return sorted({e.track_id for e in log if isinstance(e, TrackConfirmed)} - {mug, "trk-000001"})
 
 
 def unrefuted_rivals(params: Params) -> object:
@@ -246,6 +252,7 @@ WITNESSES: dict[str, tuple[Outcome, object, object]] = {
     "deferred_reidentification": (deferred_reidentification, True, False),
     "fallback_absence": (fallback_absence, ["trk-000001", "trk-000002"], ["trk-000001"]),
     "fallback_ranking": (fallback_ranking, "trk-000001", None),
+    "claimed_hypotheses": (claimed_hypotheses, ["trk-000003"], ["trk-000003", "trk-000004"]),
     "clear_view_misses": (clear_view_misses, 3, 5),
     "identity_handover": (identity_handover, True, False),
     "unrefuted_rivals": (unrefuted_rivals, "removed", "confirmed"),
