@@ -1,0 +1,106 @@
+"""Two runs of one method on the same worlds, side by side: each figure of the dynamic interval
+table with its interval, and their paired difference with its interval (the worlds resampled
+once for both). What `python -m evaluation.compare BEFORE AFTER` prints, for a change to the
+method measured against the code before it.
+
+    python -m evaluation.compare before/results.json after/results.json [--method NAME] [--out F]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from evaluation.confidence import (
+    Interval,
+    excludes_zero,
+    mean_difference_interval,
+    mean_interval,
+    ratio_difference_interval,
+    ratio_interval,
+    signed,
+    spelled,
+)
+from evaluation.methods import OURS
+from evaluation.world_intervals import DYNAMIC_FIGURES
+
+Row = Mapping[str, Any]
+
+
+def paired_runs(before: Sequence[Row], after: Sequence[Row], method: str) -> list[tuple[Row, Row]]:
+    """The method's runs in both, on the same (world, seed), in a fixed order."""
+
+    def keyed(rows: Sequence[Row]) -> dict[tuple[str, int], Row]:
+        return {
+            (r["scenario"], r["seed"]): r
+            for r in rows
+            if r["method"] == method and "error" not in r
+        }
+
+    first, second = keyed(before), keyed(after)
+    return [(first[key], second[key]) for key in sorted(first.keys() & second.keys())]
+
+
+def compared(pairs: Sequence[tuple[Row, Row]]) -> list[tuple[str, Interval, Interval, Interval]]:
+    """(figure, before, after, after - before) for every figure both runs hold."""
+    table = []
+    for _, title, fields in DYNAMIC_FIGURES:
+        if any(field not in row for pair in pairs for row in pair for field in fields):
+            continue
+        sides = [[pair[side] for pair in pairs] for side in (0, 1)]
+        if len(fields) == 2:
+            counts = [
+                ([r[fields[0]] for r in rows], [r[fields[1]] for r in rows]) for rows in sides
+            ]
+            values = [ratio_interval(*c) for c in counts]
+            difference = ratio_difference_interval(counts[1], counts[0])
+        else:
+            numbers = [[float(r[fields[0]]) for r in rows] for rows in sides]
+            values = [mean_interval(n) for n in numbers]
+            difference = mean_difference_interval(numbers[1], numbers[0])
+        table.append((title, values[0], values[1], difference))
+    return table
+
+
+def markdown(table: Sequence[tuple[str, Interval, Interval, Interval]], worlds: int) -> str:
+    """The comparison as a markdown table; a difference whose interval excludes 0 is marked."""
+    lines = [
+        f"Over {worlds} paired worlds; 95% bootstrap intervals in brackets; "
+        "* marks a difference whose interval excludes 0.",
+        "",
+        "| figure | before | after | after - before |",
+        "| --- | --- | --- | --- |",
+    ]
+    for title, before, after, difference in table:
+        mark = " *" if excludes_zero(difference) else ""
+        lines.append(
+            f"| {title} | {spelled(before)} | {spelled(after)} | {signed(difference)}{mark} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Print (and with --out write) the comparison of two results.json."""
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("before", type=Path, help="results.json of the code before the change")
+    parser.add_argument("after", type=Path, help="results.json of the code after it")
+    parser.add_argument("--method", default=OURS, help=f"the method compared (default: {OURS})")
+    parser.add_argument("--out", type=Path, default=None, help="also write the table here")
+    args = parser.parse_args(argv)
+    runs = [
+        json.loads(path.read_text(encoding="utf-8"))["runs"] for path in (args.before, args.after)
+    ]
+    pairs = paired_runs(runs[0], runs[1], args.method)
+    if not pairs:
+        raise SystemExit(f"no run of {args.method!r} on the same world and seed in both files")
+    text = markdown(compared(pairs), len(pairs))
+    print(text, end="")
+    if args.out is not None:
+        args.out.write_text(text, encoding="utf-8")
+
+
+if __name__ == "__main__":
+    main()
