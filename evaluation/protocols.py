@@ -110,6 +110,9 @@ def dynamic_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
     timing = (run.observable_frames or None, FRAMES_PER_BATCH, run.scenario.event_latency_batches)
     recall = event_recall(changes, answers, assignment, fixture_map, truth, predictions, *timing)
     lenient = lenient_event_recall(changes, answers, assignment, fixture_map, len(truth), *timing)
+    trace = _event_trace(
+        result, assignment, truth, predictions, (recall, lenient), stream.empty_place_batches
+    )
     absence = class_false_absence(truth, predictions)
     identity_absence = false_absence(truth, predictions, assignment)
     return {
@@ -128,10 +131,8 @@ def dynamic_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
         "events_total": recall.total,
         "events_unobservable": recall.unobservable,
         "event_latency_bound_batches": recall.latency_bound_batches,
-        **change_kinds(recall, stream.empty_place_batches),
-        "event_trace": _event_trace(
-            result, assignment, truth, predictions, (recall, lenient), stream.empty_place_batches
-        ),
+        **change_kinds(trace),
+        "event_trace": trace,
         # False absence: identity-conditioned (`_identity`) is the strict headline, the
         # identity-agnostic one the lenient reading.
         "false_absence": absence.rate,
@@ -151,25 +152,28 @@ def dynamic_scores(stream: Stream, result: MethodRun) -> dict[str, Any]:
 MIN_EMPTY_VIEWS = 3
 
 
-def change_kinds(recall: EventRecall, empty_batches: Sequence[int | None]) -> dict[str, int]:
-    """Recall of two kinds of change, strictly read: moves and transfers (observable ones)
-    reflected for the identity the object had before, and removals of objects whose empty place
-    was in view in at least `MIN_EMPTY_VIEWS` batches of the bound, each within the bound."""
-    outcomes = recall.per_event
+def change_kinds(trace: Sequence[Mapping[str, Any]]) -> dict[str, int]:
+    """Recall of two kinds of change, from the event trace, strictly read and within the bound:
+    moves and transfers of an object the memory held just before (an identity to carry over)
+    that were observable, reflected for that identity; and removals of objects whose empty
+    place was in view in at least `MIN_EMPTY_VIEWS` batches of the bound."""
     carries = [
-        o
-        for o in outcomes
-        if o.event.type in ("move", "transfer") and o.observable_frame is not None
+        row
+        for row in trace
+        if row["type"] in ("move", "transfer")
+        and row["observable_frame"] is not None
+        and row["identity_before"] is not None
     ]
-    counts = empty_batches or (None,) * len(outcomes)
     seen_empty = [
-        o for o, n in zip(outcomes, counts, strict=True) if n is not None and n >= MIN_EMPTY_VIEWS
+        row
+        for row in trace
+        if row["type"] == "disappear" and (row["empty_place_batches"] or 0) >= MIN_EMPTY_VIEWS
     ]
     return {
         "carries_total": len(carries),
-        "carries_recalled_identity": sum(o.within_bound for o in carries),
+        "carries_recalled_identity": sum(bool(row["recalled_identity"]) for row in carries),
         "removals_seen_empty": len(seen_empty),
-        "removals_seen_empty_recalled": sum(o.within_bound for o in seen_empty),
+        "removals_seen_empty_recalled": sum(bool(row["recalled_identity"]) for row in seen_empty),
     }
 
 

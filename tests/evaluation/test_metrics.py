@@ -8,8 +8,6 @@ import pytest
 
 from core.events import ObjectAdded, TrackConfirmed, TrackMoved, TrackRemoved, TrackReparented
 from evaluation.change_metrics import (
-    EventOutcome,
-    EventRecall,
     class_false_absence,
     event_recall,
     false_absence,
@@ -569,23 +567,26 @@ def test_mean_std_uses_the_sample_deviation() -> None:
 
 
 def test_carries_and_removals_seen_empty_are_counted_apart() -> None:
-    def outcome(kind: str, observable: int | None, within: bool) -> EventOutcome:
-        event = ScheduledEvent(frame=10, type=kind, object_id=f"{kind}-{observable}-{within}")
-        recalled = 20 if within else None
-        return EventOutcome(event, observable, recalled, 1 if within else None, within)
+    def row(kind: str, observable: int | None, within: bool, **more: object) -> dict[str, object]:
+        return {
+            "type": kind,
+            "observable_frame": observable,
+            "identity_before": more.get("before", "trk-1"),
+            "recalled_identity": within,
+            "empty_place_batches": more.get("empty"),
+        }
 
-    outcomes = [
-        outcome("move", 12, True),
-        outcome("transfer", 12, False),
-        outcome("move", None, False),  # never observable: not judged
-        outcome("disappear", 12, True),  # its place seen empty in 3 batches
-        outcome("disappear", 12, False),  # in 2: not judged
-        outcome("disappear", 12, False),  # in 4, removed late
-        outcome("appear", 12, True),
+    trace = [
+        row("move", 12, True),
+        row("transfer", 12, False),
+        row("move", None, False),  # never observable: not judged
+        row("transfer", 12, False, before=None),  # not held before: no identity to carry
+        row("disappear", 12, True, empty=3),
+        row("disappear", 12, False, empty=2),  # its place seen empty in 2 batches: not judged
+        row("disappear", 12, False, empty=4),  # removed late
+        row("appear", 12, True),
     ]
-    recall = EventRecall(3, len(outcomes), 3, 1, outcomes, 10)
-    kinds = change_kinds(recall, (None, None, None, 3, 2, 4, None))
-    assert kinds == {
+    assert change_kinds(trace) == {
         "carries_total": 2,
         "carries_recalled_identity": 1,
         "removals_seen_empty": 2,
