@@ -155,8 +155,9 @@ MIN_EMPTY_VIEWS = 3
 def change_kinds(trace: Sequence[Mapping[str, Any]]) -> dict[str, int]:
     """Recall of two kinds of change, from the event trace, strictly read and within the bound:
     moves and transfers of an object the memory held just before (an identity to carry over)
-    that were observable, reflected for that identity; and removals of objects whose empty
-    place was in view in at least `MIN_EMPTY_VIEWS` batches of the bound."""
+    that were observable, reflected for that identity; and removals of objects the memory held
+    just before whose empty place was in view in at least `MIN_EMPTY_VIEWS` batches of the
+    bound."""
     carries = [
         row
         for row in trace
@@ -167,7 +168,9 @@ def change_kinds(trace: Sequence[Mapping[str, Any]]) -> dict[str, int]:
     seen_empty = [
         row
         for row in trace
-        if row["type"] == "disappear" and (row["empty_place_batches"] or 0) >= MIN_EMPTY_VIEWS
+        if row["type"] == "disappear"
+        and row["identity_before"] is not None
+        and (row["empty_place_batches"] or 0) >= MIN_EMPTY_VIEWS
     ]
     return {
         "carries_total": len(carries),
@@ -195,7 +198,7 @@ def _event_trace(
         track = assignment.get(event.object_id)
         before = (
             track
-            if event.type in ("appear", "disappear")
+            if event.type == "appear"
             else identity_before(event, assignment, truth, predictions)
         )
         trace.append(

@@ -584,6 +584,7 @@ def test_carries_and_removals_seen_empty_are_counted_apart() -> None:
         row("disappear", 12, True, empty=3),
         row("disappear", 12, False, empty=2),  # its place seen empty in 2 batches: not judged
         row("disappear", 12, False, empty=4),  # removed late
+        row("disappear", 12, False, empty=5, before=None),  # never held: nothing to remove
         row("appear", 12, True),
     ]
     assert change_kinds(trace) == {
