@@ -119,9 +119,10 @@ class AssociationParams:
     # when one of them wins nothing is lent yet (it may be the object, still in place or not yet
     # known to be gone). False: only the tracks whose absence is established are compared.
     unrefuted_rivals: bool = True
-    # Ours (`claimed_hypotheses`): a hypothesis whose appearance matches, past the gate, a
-    # published object of a compatible class last seen before it (missing, or unrefuted and not
-    # seen in this batch) is not published yet: it may be that object, carried here. Published,
+    # Ours (`claimed_hypotheses`): a hypothesis whose appearance singles out a published object
+    # of a compatible class last seen before it (missing, or unrefuted and not seen in this
+    # batch: cosine past the gate by `fallback_margin`, and by the margin over every other such
+    # object) is not published yet: it may be that object, carried here. Published,
     # it would take a second identity, and handing the old one back later is a second switch.
     # It waits until that object is seen elsewhere (then they are two), its absence is
     # established (then the hypothesis takes its identity back), or it has been seen in this

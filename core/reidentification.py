@@ -90,9 +90,10 @@ def claimed_hypotheses(
     columns: TrackColumns, eligible: BoolArray | None, absent: BoolArray, params: AssociationParams
 ) -> frozenset[str]:
     """The hypotheses this batch sighted whose publication waits (`claimed_hold_max_batches`):
-    never published, seen in at most that many batches, and matching past the appearance gate
-    a published object of a compatible class last seen before them, missing or unrefuted, that
-    this batch did not see."""
+    never published, seen in at most that many batches, whose best appearance match among the
+    published objects of a compatible class last seen before them (missing or unrefuted) that
+    this batch did not see passes the gate by the fallback margin and beats every other one by
+    the margin: a single known object it may well be, not one of several look-alikes."""
     limit = params.claimed_hold_max_batches
     if limit <= 0 or not params.unique_class_fallback:
         return frozenset()
@@ -117,7 +118,13 @@ def claimed_hypotheses(
             claimants[row] = False
     rows = np.asarray(hypotheses, dtype=np.intp)
     scores = _scores(columns, rows, np.flatnonzero(claimants), params)
-    claimed = (scores > params.min_appearance_cosine).any(axis=1)
+    if scores.shape[1] == 0:
+        return frozenset()
+    ranked = -np.sort(-scores, axis=1)
+    best = ranked[:, 0]
+    runner_up = ranked[:, 1] if scores.shape[1] > 1 else np.full(rows.size, -1.0)
+    margin = params.fallback_margin
+    claimed = (best > params.min_appearance_cosine + margin) & (best - runner_up >= margin)
     return frozenset(columns.ids[row] for row in rows[claimed].tolist())
 
 
