@@ -17,7 +17,14 @@ from core.inspection import decide_inspection
 from core.navigation import Navigation
 from core.occupancy import OccupancyGrid
 from core.params import Params
-from core.planner import decide_plan, inspection_queue, plan, proximity, queue_status
+from core.planner import (
+    decide_plan,
+    inspection_queue,
+    plan,
+    proximity,
+    queue_status,
+    unresolved_fixtures,
+)
 from core.state import SceneState, Track, TrackChanges
 from core.uncertainty import TERMS, fixture_uncertainty
 from core.values import ViewPose
@@ -431,3 +438,21 @@ def test_a_robot_far_from_the_known_map_is_told_to_look_around_without_planning(
     assert "not in known free space" in far.reason
     inside = plan(state, ROBOT)
     assert inside.decision == "done"  # a closed, fully known room: nothing to do
+
+
+def test_every_fixture_class_of_a_home_is_inspected_by_default_and_a_task_may_name_fewer() -> None:
+    # A phone on a nightstand (a cabinet), glasses on a bed, a remote on a sofa.
+    labels = ("table", "desk", "counter", "bed", "shelf", "cabinet", "sofa")
+    tracks = {
+        f"trk-{i:06d}": fixture(f"trk-{i:06d}", (i + 1.0, 1.0, 0.4), (1.0, 0.6, 0.8)).evolved(
+            class_evidence={label: 12.0}
+        )
+        for i, label in enumerate(labels)
+    }
+    state = SceneState(tracks=tracks)
+    assert [state.tracks[t.track_id].label for t in unresolved_fixtures(state)] == list(labels)
+    kitchen = Params.from_dict({"fixtures": {"inspection_taxonomy": ["counter", "table"]}})
+    assert [t.label for t in unresolved_fixtures(replace(state, params=kitchen))] == [
+        "table",
+        "counter",
+    ]
