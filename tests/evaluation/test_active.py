@@ -39,7 +39,8 @@ from sim.world import Box
 from tests.clients import local_pbdag_client
 
 # A 5 m x 4 m room: two fixtures to inspect (a table, a counter), one that is not inspected
-# (a sofa), four fine objects. The robot starts in the middle, facing the table.
+# (a sofa: the task's inspection taxonomy, `TASK`, names tables and counters only), four fine
+# objects. The robot starts in the middle, facing the table.
 SMALL: dict[str, Any] = {
     "name": "active-small",
     "seed": 3,
@@ -75,12 +76,15 @@ SMALL: dict[str, Any] = {
 # consensus gate sends the table to verification instead of publishing it (at some seeds the
 # voxel query's retained points agree enough for the gate: 17 and 3 publish it directly).
 CONFLICTING: dict[str, Any] = copy.deepcopy(SMALL)
+# The scene's params of these rollouts: a task that inspects tables and counters only (every
+# fixture class is inspected by default).
+TASK = {"fixtures": {"inspection_taxonomy": ["table", "counter"]}}
 CONFLICTING["detector"]["fixtures"]["ambiguity"] = {"table_1": {"table": 0.56, "desk": 0.555}}
 
 
 def test_a_rollout_from_an_empty_map_finds_inspects_and_exhausts_the_frontiers() -> None:
     scenario = scenario_from_dict(copy.deepcopy(SMALL))
-    memory = InProcessMemory("small")
+    memory = InProcessMemory("small", TASK)
     assert memory.state.occupancy.known_cells() == 0 and not memory.state.tracks
     result = rollout(scenario, 7, memory)
     state = memory.state
@@ -92,7 +96,7 @@ def test_a_rollout_from_an_empty_map_finds_inspects_and_exhausts_the_frontiers()
     # Every fixture of the inspection taxonomy was inspected, or the plan says why not.
     final = result.decisions[-1]
     for track in state.tracks.values():
-        if track.kind == "fixture" and track.label in ("table", "counter"):
+        if track.kind == "fixture" and track.label in state.params.fixtures.inspection_taxonomy:
             assert track.inspection_status == "completed" or track.track_id in final["deferred"], (
                 track.track_id,
                 track.inspection_status,
@@ -164,9 +168,9 @@ def run_row_like(result: Any) -> tuple[dict[str, Any], Any]:
 def test_the_rollout_through_the_http_api_decides_as_in_process(container: Container) -> None:
     # The conflicting table goes through the verification queue and the verdict route too.
     scenario = scenario_from_dict(copy.deepcopy(CONFLICTING))
-    local = rollout(scenario, 7, InProcessMemory("small"))
+    local = rollout(scenario, 7, InProcessMemory("small", TASK))
     with local_pbdag_client(create_app(container, run_worker=True)) as client:
-        remote = rollout(scenario, 7, ServiceMemory(client, "small"), via_service=True)
+        remote = rollout(scenario, 7, ServiceMemory(client, "small", TASK), via_service=True)
     assert [d["decision"] for d in remote.decisions] == [d["decision"] for d in local.decisions]
     assert [c.fixture_id for c in remote.captures] == [c.fixture_id for c in local.captures]
     assert [c.outcome for c in remote.captures] == [c.outcome for c in local.captures]
@@ -341,7 +345,7 @@ def _table_track(memory: InProcessMemory) -> str:
 
 def test_a_fixture_with_conflicting_class_scores_is_verified_published_and_inspected() -> None:
     scenario = scenario_from_dict(copy.deepcopy(CONFLICTING))
-    memory = InProcessMemory("conflicting")
+    memory = InProcessMemory("conflicting", TASK)
     result = rollout(scenario, 7, memory)
     table = _table_track(memory)
     track = memory.state.tracks[table]
@@ -357,7 +361,7 @@ def test_a_fixture_with_conflicting_class_scores_is_verified_published_and_inspe
     assert [(c.outcome, c.fixture_verified) for c in captures] == [(Recorded("completed"), True)]
     assert captures[0].target is not None and captures[0].target.fixture_id == table
     # Without the verifier the same table waits for a verdict forever, unpublished, uninspected.
-    unanswered = InProcessMemory("conflicting")
+    unanswered = InProcessMemory("conflicting", TASK)
     silent = rollout(scenario, 7, unanswered, RolloutSettings(verifier=False))
     waiting = unanswered.state.tracks[_table_track(unanswered)]
     assert (waiting.verification, waiting.lifecycle) == ("pending", "tentative")
@@ -367,7 +371,7 @@ def test_a_fixture_with_conflicting_class_scores_is_verified_published_and_inspe
 
 def test_a_verifier_that_is_always_wrong_retires_the_true_table_and_rejects_every_parent() -> None:
     scenario = scenario_from_dict(copy.deepcopy(CONFLICTING))
-    memory = InProcessMemory("wrong")
+    memory = InProcessMemory("wrong", TASK)
     result = rollout(scenario, 7, memory, RolloutSettings(verifier_error_rate=1.0))
     table = memory.state.tracks[_table_track(memory)]
     (verdict,) = result.verdicts
