@@ -9,16 +9,12 @@ whose appearance could matter.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import numpy.typing as npt
 
 from core.belief import class_compatibility
 from core.params import AssociationParams
-
-if TYPE_CHECKING:
-    from core.frontend import TrackColumns
+from core.track_columns import TrackColumns
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]

@@ -12,7 +12,7 @@ from core.emit import decision_events
 from core.events import TrackRetired
 from core.evolve import fold
 from core.existence import object_sighting
-from core.frontend import TrackColumns, second_tracks
+from core.frontend import second_tracks
 from core.geometry import Proposal
 from core.inspection import decide_inspection
 from core.lifecycle import sighting_decision
@@ -21,6 +21,7 @@ from core.observation import Batch, Detection
 from core.params import Params
 from core.rules import UpdateRules
 from core.state import SceneState, Track
+from core.track_columns import TrackColumns
 from core.visibility import observable, samples_passed
 from tests.core.realistic import BIN, MUG, run, split_batch, split_in_two, with_scores
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
