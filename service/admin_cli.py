@@ -131,6 +131,10 @@ def _rebuild_scenes(log: EventLog, only: list[str] | None) -> int:
             f"; {report.snapshots_reencoded} snapshots in an older format rewritten"
             if report.snapshots_reencoded
             else ""
+        ) + (
+            f"; {report.tracks_reencoded} tracks rewritten with the fields added since"
+            if report.tracks_reencoded
+            else ""
         )
         print(
             f"{scene_id}: {report.events} events replayed; projections {verdict}{differences}"

@@ -31,6 +31,10 @@ def world_row(scenario: str, method: str, idf1: float, recalled: int) -> dict[st
         "eligible_checkpoints": 10,
         "false_absent_checkpoints_identity": 1,
         "eligible_checkpoints_identity": 10,
+        "carries_recalled_identity": 1,
+        "carries_total": 2,
+        "removals_seen_empty_recalled": 0,
+        "removals_seen_empty": 1,
     }
 
 
@@ -69,6 +73,9 @@ def test_the_interval_table_has_one_row_per_method_and_every_figure() -> None:
     assert (figures["id_switches_any_class"].value, figures["id_switches"].value) == (3.0, 1.0)
     assert figures["false_absence_identity"].value == pytest.approx(0.1)
     assert figures["false_absence"].value == 0.0
+    # Moves and transfers 3/6, removals where the place showed empty 0/3.
+    assert figures["carry_recall"].value == pytest.approx(0.5)
+    assert figures["removal_recall_seen_empty"].value == 0.0
     text = interval_table("dynamic", rows)
     assert "Over 3 worlds" in text
     assert "| PBD-AG (extended) | .800 [" in text

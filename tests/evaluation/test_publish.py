@@ -43,6 +43,12 @@ def dynamic_run(scenario: str, strict: bool) -> dict[str, Any]:
     }
     if strict:
         row |= {"id_switches_any_class": 2, "events_recalled_identity": 1}
+        row |= {
+            "carries_recalled_identity": 1,
+            "carries_total": 2,
+            "removals_seen_empty_recalled": 1,
+            "removals_seen_empty": 1,
+        }
     return row
 
 
@@ -101,16 +107,19 @@ def test_publish_reads_the_strict_headlines_and_names_what_an_older_run_lacks(
     text = readme.read_text()
     test_part, dev_part = text.split("**Development**")
     # Test split: IDS 2 (class-agnostic) before the class-aware 0, Event R. 1/4 before the
-    # lenient 4/4, False abs. identity-conditioned .100 before the agnostic .000.
+    # lenient 4/4, moves and transfers 1/2, removals where the place showed empty 1/1, False
+    # abs. identity-conditioned .100 before the agnostic .000.
     assert (
         "| PBD-AG (extended) | .800 [.800, .800] | .800 [.800, .800] | 2.000 [2.000, 2.000] "
-        "| .000 [.000, .000] | .250 [.250, .250] | 1.000 [1.000, 1.000] | .100 [.100, .100] "
-        "| .000 [.000, .000] |" in test_part
+        "| .000 [.000, .000] | .250 [.250, .250] | 1.000 [1.000, 1.000] | .500 [.500, .500] "
+        "| 1.000 [1.000, 1.000] | .100 [.100, .100] | .000 [.000, .000] |" in test_part
     )
     assert "shown as -" not in test_part
     # The older development run: its strict IDS and Event R. are dashes, and named.
     assert "| .800 [.800, .800] | - | .000 [.000, .000] | - | 1.000 [1.000, 1.000] |" in dev_part
-    assert "`id_switches_any_class`, `events_recalled_identity`" in dev_part
+    assert "`id_switches_any_class`, `events_recalled_identity`, `carries_recalled_identity`" in (
+        dev_part
+    )
 
 
 def test_publish_gives_each_extension_s_effect_and_table3_the_paper_s_profile(
