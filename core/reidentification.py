@@ -38,13 +38,7 @@ def reidentifications(
     if not (params.unique_class_fallback and params.reidentify_hypotheses):
         return {}
     arrays = columns.state.arrays
-    objects = (np.asarray(arrays.kinds) == "object") & ~arrays.captured
-    if eligible is not None:
-        objects &= eligible
-    for track_id in columns.observations:
-        row = columns.row[track_id]
-        if row < columns.count:
-            objects[row] = False
+    objects = _unmatched_objects(columns, eligible)
     missing = objects & arrays.published & absent
     if not missing.any():
         return {}
@@ -104,14 +98,8 @@ def claimed_hypotheses(
             hypotheses.append(row)
     if not hypotheses:
         return frozenset()
-    claimants = (np.asarray(arrays.kinds) == "object") & ~arrays.captured & arrays.published
+    claimants = _unmatched_objects(columns, eligible) & arrays.published
     claimants &= absent | ~arrays.gone  # a removed object still claims; a rejected one does not
-    if eligible is not None:
-        claimants &= eligible
-    for track_id in columns.observations:
-        row = columns.row[track_id]
-        if row < columns.count:
-            claimants[row] = False
     rows = np.asarray(hypotheses, dtype=np.intp)
     scores = _scores(columns, rows, np.flatnonzero(claimants), params)
     if scores.shape[1] == 0:
@@ -122,6 +110,20 @@ def claimed_hypotheses(
     margin = params.fallback_margin
     claimed = (best > params.min_appearance_cosine + margin) & (best - runner_up >= margin)
     return frozenset(columns.ids[row] for row in rows[claimed].tolist())
+
+
+def _unmatched_objects(columns: TrackColumns, eligible: BoolArray | None) -> BoolArray:
+    """The state's object tracks the front end may weigh here: not held by the capture ledger,
+    eligible, and not matched in this batch."""
+    arrays = columns.state.arrays
+    objects: BoolArray = (np.asarray(arrays.kinds) == "object") & ~arrays.captured
+    if eligible is not None:
+        objects &= eligible
+    for track_id in columns.observations:
+        row = columns.row[track_id]
+        if row < columns.count:
+            objects[row] = False
+    return objects
 
 
 def _seen_since(columns: TrackColumns, rows: Rows) -> FloatArray:
