@@ -27,9 +27,11 @@ class Scene(BaseModel):
 
 
 class SceneList(BaseModel):
-    """Every scene."""
+    """A page of scenes, oldest first; pass `next_after` as `after` for the next page (null at
+    the end)."""
 
     scenes: list[Scene]
+    next_after: str | None = None
 
 
 class BatchStatus(BaseModel):

@@ -28,9 +28,11 @@ import httpx
 import numpy as np
 from PIL import Image
 from pycocotools import mask as coco_mask
+from pydantic import TypeAdapter
 
 from bench.perf_common import write_results
 from bench.records import MemoryCase, MemoryResult
+from core.params import MAX_CLASS_SCORE_CELLS, Params
 from service.settings import Settings
 
 PBDAG = [sys.executable, "-m", "service.cli"]
@@ -150,11 +152,70 @@ def many_frames() -> list[dict[str, Any]]:
     return frames
 
 
-CASES: dict[str, Callable[[], list[dict[str, Any]]]] = {
-    "largest depth images": noise_frames,
-    "most detections with long embeddings": many_objects,
-    "most fixture masks over noise depth": many_fixtures,
-    "most frames with most detections": many_frames,
+# The budgets a scene's params set, each raised to the end of its range (the finest voxel and
+# stride at the low end): the most work a write token can ask of a worker per batch.
+WORK_BUDGETS = {
+    "ProposalParams": {"max_mask_samples": "maximum"},
+    "FixtureParams": {
+        "max_voxels_per_batch": "maximum",
+        "max_points_per_batch": "maximum",
+        "mask_pixel_stride": "minimum",
+        "voxel_size_m": "minimum",
+    },
+    "VisibilityParams": {"max_range_m": "maximum"},
+    "OccupancyParams": {"max_range_m": "maximum", "pixel_stride": "minimum"},
+}
+SECTIONS = {
+    "ProposalParams": "proposal",
+    "FixtureParams": "fixtures",
+    "VisibilityParams": "visibility",
+    "OccupancyParams": "occupancy",
+}
+
+
+def most_work_params() -> dict[str, Any]:
+    """Scene params with every work budget at the end of its documented range, and the
+    longest taxonomy (read from the params' own schema, so the case follows the ranges)."""
+    schema = TypeAdapter(Params).json_schema()["$defs"]
+    params: dict[str, Any] = {}
+    for model, fields in WORK_BUDGETS.items():
+        properties = schema[model]["properties"]
+        params[SECTIONS[model]] = {
+            name: properties[name].get(end, properties[name].get(f"exclusive{end.title()}"))
+            for name, end in fields.items()
+        }
+    labels = schema["FixtureParams"]["properties"]["taxonomy"]["maxItems"]
+    params["fixtures"]["taxonomy"] = [f"fixture{i}" for i in range(labels)]
+    # A batch's voxels times the classes are bounded together (see FixtureParams).
+    voxels = params["fixtures"]["max_voxels_per_batch"]
+    params["fixtures"]["max_voxels_per_batch"] = min(voxels, MAX_CLASS_SCORE_CELLS // labels)
+    params["fixtures"]["inspection_taxonomy"] = []
+    return params
+
+
+def ramp_fixture_frames() -> list[dict[str, Any]]:
+    """The most frames of the largest image, each with one full-frame fixture mask scored for
+    every class: depth ramps along each row to the furthest range the params admit (identical
+    rows compress to a few KB, yet every pixel lands in a voxel of its own)."""
+    depth = np.tile(np.linspace(300, 65000, WIDTH), (HEIGHT, 1))
+    full = rle(np.ones((HEIGHT, WIDTH), dtype=bool))
+    taxonomy = most_work_params()["fixtures"]["taxonomy"]
+    scores = {label: 0.5 for label in taxonomy[: DEFAULTS.max_class_scores]}
+    detection = {"label": taxonomy[0], "score": 0.9, "kind": "fixture", "mask": full}
+    detection["class_scores"] = scores
+    return [
+        frame(index, WIDTH, HEIGHT, depth, [detection])
+        for index in range(DEFAULTS.max_frames_per_batch)
+    ]
+
+
+# Each case: the batch, and the scene params it is posted under (None: the defaults).
+CASES: dict[str, tuple[Callable[[], list[dict[str, Any]]], Callable[[], dict[str, Any]] | None]] = {
+    "largest depth images": (noise_frames, None),
+    "most detections with long embeddings": (many_objects, None),
+    "most fixture masks over noise depth": (many_fixtures, None),
+    "most frames with most detections": (many_frames, None),
+    "fixture masks under the most-work params": (ramp_fixture_frames, most_work_params),
 }
 
 
@@ -170,8 +231,14 @@ def peak_mb(process: subprocess.Popen[bytes]) -> float:
     return usage.ru_maxrss / 1024
 
 
-def run_case(name: str, make: Callable[[], list[dict[str, Any]]], root: Path) -> MemoryCase:
-    """Serve, post the batch, stop the API; drain with a worker; peak memory of both."""
+def run_case(
+    name: str,
+    make: Callable[[], list[dict[str, Any]]],
+    root: Path,
+    params: dict[str, Any] | None = None,
+) -> MemoryCase:
+    """Serve, post the batch (into a scene with `params`), stop the API; drain with a worker;
+    peak memory of both."""
     body: dict[str, Any] = {"batch_id": "largest", "frames": make()}
     content = httpx.Request("POST", "http://x", json=body).content
     data = root / name.replace(" ", "-")
@@ -197,7 +264,10 @@ def run_case(name: str, make: Callable[[], list[dict[str, Any]]], root: Path) ->
                 break
             except httpx.TransportError:
                 time.sleep(0.1)
-        scene = httpx.post(f"{url}/v1/scenes", json={"name": "memory"}).json()["id"]
+        created = httpx.post(f"{url}/v1/scenes", json={"name": "memory", "params": params or {}})
+        if created.status_code != 201:
+            raise RuntimeError(f"{name}: scene refused {created.status_code} {created.text[:300]}")
+        scene = created.json()["id"]
         started = time.perf_counter()
         response = httpx.post(
             f"{url}/v1/scenes/{scene}/batches",
@@ -253,8 +323,9 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     cases: dict[str, MemoryCase] = {}
     with tempfile.TemporaryDirectory(prefix="pbdag-memory-") as temp:
-        for name, make in CASES.items():
-            case = cases[name] = run_case(name, make, Path(temp))
+        for name, (make, params) in CASES.items():
+            print(f"{name}: posting ...", flush=True)
+            case = cases[name] = run_case(name, make, Path(temp), params() if params else None)
             within = max(case.api_peak_mb, case.worker_peak_mb) <= args.budget_mb
             print(
                 f"{name:>38}: {case.body_mb:5.1f} MB body, {case.frames} frames, "

@@ -60,7 +60,7 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
         touched.update(event.touched_tracks())
         match event:
             case SceneCreated():
-                params = Params.from_dict(dict(event.params))
+                params = Params.recorded(event.params)
                 name = event.name
                 source_baseline = None if event.baseline is None else event.baseline.__dict__
             case FixtureEvidence():

@@ -16,6 +16,7 @@ import orjson
 from pydantic import AfterValidator, ConfigDict, Field, TypeAdapter, ValidationError
 
 from core.errors import InvalidParams, field_path
+from core.params_shape import check_shape
 
 # Parameters are checked when a scene is created (and recorded only then): strict types (no
 # "525" for a number, no true for an integer), finite numbers, ranges, no unknown keys.
@@ -292,6 +293,10 @@ class LifecycleParams:
 
 
 SizeLimits = tuple[Metres, Metres, Metres, Metres, Metres, Metres]  # min dx, dy, dz, max dx, dy, dz
+# Class scores one batch's voxels may carry (voxels x taxonomy classes): 2,000,000 float64 are
+# 16 MB per array, and merging a batch into the map takes a few such arrays. The defaults
+# (200,000 voxels, 7 classes) use 1,400,000.
+MAX_CLASS_SCORE_CELLS = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -325,11 +330,14 @@ class FixtureParams:
     # Voxels one batch's fixture masks may add to the map. A 2 x 1 m table top seen at 5 cm is
     # about 800 voxels, a whole room's furniture in one frame a few 10,000: the budget bounds the
     # work and the event of a batch of hostile masks (flat noise depth), not real evidence.
-    max_voxels_per_batch: Annotated[int, Field(ge=1, le=10_000_000)] = 200_000
+    # At most 1,000,000, and at most MAX_CLASS_SCORE_CELLS / len(taxonomy): each voxel carries a
+    # score per class, and a batch's voxels times the classes are the arrays merged into the map.
+    max_voxels_per_batch: Annotated[int, Field(ge=1, le=1_000_000)] = 200_000
     # Sampled mask points one batch's fixture masks may back-project (the work behind the
     # voxels): 2,000,000 are 100 VGA fixture masks at the stride above, or 13 full masks of a
-    # 2.4 MP frame. Masks past it add nothing to the batch.
-    max_points_per_batch: Annotated[int, Field(ge=1, le=100_000_000)] = 2_000_000
+    # 2.4 MP frame. Masks past it add nothing to the batch. At most 10,000,000: 4 full masks at
+    # stride 1 of the largest frame the service admits by default.
+    max_points_per_batch: Annotated[int, Field(ge=1, le=10_000_000)] = 2_000_000
     # A voxel is kept for class c when its mean similarity to c reaches the threshold of c and
     # beats every competing class by the margin.
     default_class_threshold: Similarity = 0.40
@@ -397,6 +405,12 @@ class FixtureParams:
     def __post_init__(self) -> None:
         if len(set(self.taxonomy)) != len(self.taxonomy):
             raise ValueError("taxonomy: a class is listed twice")
+        if self.max_voxels_per_batch * len(self.taxonomy) > MAX_CLASS_SCORE_CELLS:
+            raise ValueError(
+                f"max_voxels_per_batch: at most {MAX_CLASS_SCORE_CELLS // len(self.taxonomy):,} "
+                f"for a taxonomy of {len(self.taxonomy)} classes (voxels x classes <= "
+                f"{MAX_CLASS_SCORE_CELLS:,})"
+            )
         for name, limits in {"default": self.default_size_limits, **self.size_limits}.items():
             if any(limits[i] > limits[i + 3] for i in range(3)):
                 raise ValueError(f"size limits of {name}: a minimum exceeds its maximum")
@@ -635,7 +649,33 @@ class Params:
 
         InvalidParams names the first offending field (`params.visibility.depth_window_px`).
         """
+        check_shape(overrides or {})
         return _validated(orjson.dumps(overrides or {}, option=orjson.OPT_SORT_KEYS))
+
+    @classmethod
+    def recorded(cls, params: Mapping[str, Any]) -> Params:
+        """The parameters a scene's log recorded, for a replay: as `from_dict`, except that a
+        work budget recorded before its range was tightened is clamped to today's ceiling (the
+        events decided with it stand; only the scene's batches still to come see the ceiling)."""
+        return cls.from_dict(_within_work_ceilings(params))
+
+
+def _within_work_ceilings(params: Mapping[str, Any]) -> Mapping[str, Any]:
+    fixtures = params.get("fixtures")
+    if not isinstance(fixtures, Mapping):
+        return params
+    classes = fixtures.get("taxonomy")
+    width = len(classes) if isinstance(classes, list | tuple) and classes else 1
+    ceilings = {
+        "max_voxels_per_batch": min(1_000_000, MAX_CLASS_SCORE_CELLS // width),
+        "max_points_per_batch": 10_000_000,
+    }
+    clamped = {
+        name: min(fixtures[name], ceiling)
+        for name, ceiling in ceilings.items()
+        if isinstance(fixtures.get(name), int) and fixtures[name] > ceiling
+    }
+    return {**params, "fixtures": {**fixtures, **clamped}} if clamped else params
 
 
 def _jsonable(value: Any) -> Any:

@@ -419,7 +419,7 @@ class SceneState:
             raise ValueError(f"snapshot format {record.get('format_version')} is not supported")
         tracks = {t["track_id"]: Track.from_dict(t) for t in record["tracks"]}
         return cls(
-            params=Params.from_dict(record["params"]),
+            params=Params.recorded(record["params"]),
             name=record["name"],
             head_seq=int(record["head_seq"]),
             tracks=tracks,

@@ -117,8 +117,8 @@ class _Routes:
         return _Call("POST", "/v1/scenes", _model(Scene), body=body)
 
     @staticmethod
-    def scenes() -> _Call[list[Scene]]:
-        return _Call("GET", "/v1/scenes", lambda r: SceneList.model_validate_json(r.content).scenes)
+    def scenes(after: str | None) -> _Call[SceneList]:
+        return _Call("GET", "/v1/scenes", _model(SceneList), _query(after=after))
 
     @staticmethod
     def scene(scene_id: str) -> _Call[Scene]:
@@ -358,8 +358,15 @@ class Client:
         return self._send(_Routes.create_scene(_scene_create(name, params, baseline, profile)))
 
     def scenes(self) -> list[Scene]:
-        """`GET /v1/scenes`: every scene."""
-        return self._send(_Routes.scenes())
+        """`GET /v1/scenes`: every scene, oldest first, following the pages to the end."""
+        found: list[Scene] = []
+        cursor: str | None = None
+        while True:
+            page = self._send(_Routes.scenes(cursor))
+            found.extend(page.scenes)
+            if page.next_after is None:
+                return found
+            cursor = page.next_after
 
     def scene(self, scene_id: str) -> Scene:
         """`GET /v1/scenes/{id}`: one scene with its head seq and parameters."""
@@ -586,8 +593,15 @@ class AsyncClient:
         )
 
     async def scenes(self) -> list[Scene]:
-        """`GET /v1/scenes`."""
-        return await self._send(_Routes.scenes())
+        """`GET /v1/scenes`: every scene, oldest first, following the pages to the end."""
+        found: list[Scene] = []
+        cursor: str | None = None
+        while True:
+            page = await self._send(_Routes.scenes(cursor))
+            found.extend(page.scenes)
+            if page.next_after is None:
+                return found
+            cursor = page.next_after
 
     async def scene(self, scene_id: str) -> Scene:
         """`GET /v1/scenes/{id}`."""

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter
+from typing import Annotated
+
+from fastapi import APIRouter, Query
 
 from api_schema import Scene, SceneCreate, SceneList
 from core.errors import NotFound
@@ -10,8 +12,9 @@ from core.params import Params, deep_merge
 from core.profiles import PROFILES
 from core.values import BaselineSource
 from service.commands import create_scene
-from service.deps import AnySceneDep, ContainerDep
+from service.deps import AnySceneDep, ContainerDep, text_query
 from service.store.baselines import read_package
+from service.store.errors import SceneNotFound
 from service.wire import scene_out
 
 router = APIRouter(prefix="/v1/scenes", tags=["scenes"])
@@ -36,9 +39,22 @@ def post_scene(body: SceneCreate, container: ContainerDep) -> Scene:
 
 
 @router.get("", response_model=SceneList)
-def list_scenes(container: ContainerDep) -> SceneList:
-    """Every scene with its head seq."""
-    return SceneList(scenes=[scene_out(record) for record in container.log.scenes()])
+def list_scenes(
+    container: ContainerDep,
+    after: Annotated[
+        str | None, text_query("Return the scenes created after this one (a scene id).", 64)
+    ] = None,
+    limit: Annotated[int, Query(ge=1, le=1000, description="Page size.")] = 100,
+) -> SceneList:
+    """The scenes with their head seqs, oldest first; `next_after` continues the listing."""
+    try:
+        page = container.log.scenes(after=after, limit=limit)
+    except SceneNotFound:
+        raise NotFound("scene", after or "", "after") from None
+    return SceneList(
+        scenes=[scene_out(record) for record in page],
+        next_after=page[-1].id if len(page) == limit else None,
+    )
 
 
 @router.get("/{scene_id}", response_model=Scene)

@@ -206,12 +206,17 @@ class EventLog:
             raise SceneNotFound(scene_id)
         return _scene(row)
 
-    def scenes(self) -> list[SceneRecord]:
-        """Every scene, oldest first."""
+    def scenes(self, after: str | None = None, limit: int | None = None) -> list[SceneRecord]:
+        """The scenes, oldest first: every one, or a page of `limit` after the scene `after`
+        (SceneNotFound when that scene does not exist)."""
+        query = sa.select(scenes).order_by(scenes.c.created_at, scenes.c.id).limit(limit)
         with read_transaction(self.engine) as connection:
-            rows = connection.execute(
-                sa.select(scenes).order_by(scenes.c.created_at, scenes.c.id)
-            ).all()
+            if after is not None:
+                cursor = self.scene(after, connection)
+                query = query.where(
+                    sa.tuple_(scenes.c.created_at, scenes.c.id) > (cursor.created_at, cursor.id)
+                )
+            rows = connection.execute(query).all()
         return [_scene(row) for row in rows]
 
     # -- the log ------------------------------------------------------------------------------

@@ -99,7 +99,13 @@ const topClasses = (probabilities, n = 3) =>
 // --- scenes and the head -------------------------------------------------------------------
 
 async function loadScenes() {
-  const { scenes } = await api("/v1/scenes");
+  const scenes = [];
+  for (let after = null; ; ) {
+    const page = await api(`/v1/scenes?limit=1000${after ? `&after=${encodeURIComponent(after)}` : ""}`);
+    scenes.push(...page.scenes);
+    if (!page.next_after) break;
+    after = page.next_after;
+  }
   const select = $("scene-select");
   select.replaceChildren(
     ...scenes.map((scene) => el("option", { value: scene.id }, `${scene.name} (${scene.id})`)),
