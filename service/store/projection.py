@@ -14,9 +14,9 @@ from core.events import BaselineFrozen, Event
 from core.evolve import fold
 from core.state import SceneState, Track
 from service.store.engine import read_transaction, write_transaction
-from service.store.event_log import EventLog
+from service.store.event_log import EventLog, StoredEvent
 from service.store.snapshot_codec import SNAPSHOT_VERSION, encode_snapshot
-from service.store.tables import baselines, snapshots, tracks
+from service.store.tables import baselines, scenes, snapshots, tracks
 
 
 def track_row(scene_id: str, track: Track, seq: int) -> dict[str, Any]:
@@ -126,32 +126,61 @@ class SceneRebuild:
 
 
 def _projections(
-    log: EventLog, scene_id: str
+    connection: sa.Connection, scene_id: str
 ) -> tuple[
     dict[str, dict[str, Any]], dict[int, bytes], dict[int, int], dict[int, tuple[int, str, Any]]
 ]:
     """The scene's projections as they stand: track rows, snapshot bodies and their formats by
     seq, baseline (seq, sha256, body) by version."""
-    with read_transaction(log.engine) as connection:
-        old_tracks = {
-            row.track_id: dict(row._mapping)
-            for row in connection.execute(sa.select(tracks).where(tracks.c.scene_id == scene_id))
-        }
-        old_snapshots, old_formats = {}, {}
-        for row in connection.execute(
-            sa.select(snapshots.c.seq, snapshots.c.format_version, snapshots.c.body).where(
-                snapshots.c.scene_id == scene_id
-            )
-        ):
-            old_snapshots[row.seq] = row.body
-            old_formats[row.seq] = row.format_version
-        old_baselines = {
-            row.version: (row.seq, row.sha256, row.body)
-            for row in connection.execute(
-                sa.select(baselines).where(baselines.c.scene_id == scene_id)
-            )
-        }
+    old_tracks = {
+        row.track_id: dict(row._mapping)
+        for row in connection.execute(sa.select(tracks).where(tracks.c.scene_id == scene_id))
+    }
+    old_snapshots, old_formats = {}, {}
+    for row in connection.execute(
+        sa.select(snapshots.c.seq, snapshots.c.format_version, snapshots.c.body).where(
+            snapshots.c.scene_id == scene_id
+        )
+    ):
+        old_snapshots[row.seq] = row.body
+        old_formats[row.seq] = row.format_version
+    old_baselines = {
+        row.version: (row.seq, row.sha256, row.body)
+        for row in connection.execute(sa.select(baselines).where(baselines.c.scene_id == scene_id))
+    }
     return old_tracks, old_snapshots, old_formats, old_baselines
+
+
+@dataclass
+class _Replay:
+    """A replay from seq 0 that can be fed in parts, snapshotting at the seqs it is given."""
+
+    state: SceneState = field(default_factory=SceneState)
+    count: int = 0
+    head: int = -1
+    snapshots: dict[int, bytes] = field(default_factory=dict)
+    touched: dict[str, int] = field(default_factory=dict)
+    frozen: list[tuple[SceneState, BaselineFrozen, int]] = field(default_factory=list)
+
+    def feed(self, stored: Iterable[StoredEvent], snapshot_seqs: Iterable[int]) -> None:
+        pending = sorted(seq for seq in snapshot_seqs if seq > self.head)
+        batch: list[Event] = []
+        for row in stored:
+            event = row.to_core()
+            if isinstance(event, BaselineFrozen):  # its package is rebuilt from the state before
+                self.state, batch = fold(self.state, batch), []
+                self.frozen.append((self.state, event, row.seq))
+            batch.append(event)
+            self.count += 1
+            self.head = row.seq
+            for track_id in event.touched_tracks():
+                self.touched[track_id] = row.seq
+            while pending and pending[0] < row.seq:  # a snapshot at no event's seq: skipped
+                pending.pop(0)
+            if pending and row.seq == pending[0]:
+                self.state, batch = fold(self.state, batch), []
+                self.snapshots[pending.pop(0)] = encode_snapshot(self.state)
+        self.state = fold(self.state, batch)
 
 
 # Fields of a track's belief added since projections were first written, each derived from
@@ -170,30 +199,29 @@ def _as_written_before(new: dict[str, Any], old: Mapping[str, Any]) -> dict[str,
 
 
 def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
-    """Drop the scene's projections and rebuild them from its log; report any difference."""
-    old_tracks, old_snapshots, old_formats, old_baselines = _projections(log, scene_id)
-    # Replay from seq 0, snapshotting at the same positions as before.
-    state, count = SceneState(), 0
-    new_snapshots: dict[int, bytes] = {}
-    touched: dict[str, int] = {}
-    pending = sorted(old_snapshots)
-    batch: list[Event] = []
-    frozen: list[tuple[SceneState, BaselineFrozen, int]] = []
-    for stored in log.iter_events(scene_id):
-        event = stored.to_core()
-        if isinstance(event, BaselineFrozen):  # its package is rebuilt from the state before it
-            state, batch = fold(state, batch), []
-            frozen.append((state, event, stored.seq))
-        batch.append(event)
-        count += 1
-        for track_id in event.touched_tracks():
-            touched[track_id] = stored.seq
-        if pending and stored.seq == pending[0]:
-            state = fold(state, batch)
-            batch = []
-            new_snapshots[pending.pop(0)] = encode_snapshot(state)
-    state = fold(state, batch)
+    """Drop the scene's projections and rebuild them from its log; report any difference.
+
+    Safe beside running workers: the long replay runs outside any write transaction, then one
+    write transaction locks the scene's row (an append updates it, so appends to this scene
+    wait), folds whatever was appended meanwhile, reads the projections as they stand at that
+    head, compares and rewrites them. The report compares like with like, at one head seq."""
+    with read_transaction(log.engine) as connection:  # the snapshots up to one head seq
+        head = log.scene(scene_id, connection).head_seq
+        early_snapshots = set(_projections(connection, scene_id)[1])
+    replay = _Replay()
+    replay.feed(log.iter_events(scene_id, up_to=head), early_snapshots)
     with write_transaction(log.engine) as connection:
+        # An append updates the scene's row: locked here, appends to this scene wait (SQLite's
+        # write transaction already holds the whole database).
+        connection.execute(
+            sa.select(scenes.c.head_seq).where(scenes.c.id == scene_id).with_for_update()
+        )
+        old_tracks, old_snapshots, old_formats, old_baselines = _projections(connection, scene_id)
+        replay.feed(log.read(scene_id, after=replay.head, connection=connection), old_snapshots)
+        state, count, touched = replay.state, replay.count, replay.touched
+        new_snapshots = {
+            seq: replay.snapshots[seq] for seq in old_snapshots if seq in replay.snapshots
+        }
         connection.execute(sa.delete(tracks).where(tracks.c.scene_id == scene_id))
         connection.execute(sa.delete(snapshots).where(snapshots.c.scene_id == scene_id))
         connection.execute(sa.delete(baselines).where(baselines.c.scene_id == scene_id))
@@ -204,7 +232,7 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
                 event.sha256,
                 write_baseline(connection, scene_id, before, event, seq),
             )
-            for before, event, seq in frozen
+            for before, event, seq in replay.frozen
         }
         for seq, body in sorted(new_snapshots.items()):
             connection.execute(

@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
 
 import orjson
 import sqlalchemy as sa
 
-from core.events import ObjectAdded, VisibleMiss
+from core.events import Event, ObjectAdded, VisibleMiss
 from core.values import Observation
 from service.bootstrap import Container
 from service.store.engine import write_transaction
@@ -89,3 +90,12 @@ def missed(track_id: str, logodds: float, misses: int) -> VisibleMiss:
         p_exist=0.5,
         visible_misses=misses,
     )
+
+
+def append_batch(
+    container: Container, scene_id: str, events: Sequence[Event], batch_id: str | None = None
+) -> tuple[int, int] | None:
+    """Append at the current head through the one write path, as the worker does."""
+    state = container.log.load_state(scene_id)
+    with container.uow.begin() as work:
+        return work.append(scene_id, state, events, batch_id=batch_id).seqs

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -36,7 +35,7 @@ from service.store.queue_records import (
 )
 from service.store.snapshot_codec import SNAPSHOT_VERSION
 from service.store.tables import snapshots, tracks
-from tests.service.minimal_events import added, missed
+from tests.service.minimal_events import added, append_batch, missed
 
 
 @pytest.fixture
@@ -48,15 +47,6 @@ def settings(tmp_path: Path) -> Settings:
 def new_scene(container: Container, name: str = "s", params: Params | None = None) -> SceneRecord:
     """A scene through the one write path."""
     return create_scene(container, name, params or Params())
-
-
-def append_batch(
-    container: Container, scene_id: str, events: Sequence[Event], batch_id: str | None = None
-) -> tuple[int, int] | None:
-    """Append at the current head through the one write path, as the worker does."""
-    state = container.log.load_state(scene_id)
-    with container.uow.begin() as work:
-        return work.append(scene_id, state, events, batch_id=batch_id).seqs
 
 
 def test_scene_starts_at_seq_zero_with_its_params_in_the_log(container: Container) -> None:
