@@ -237,6 +237,12 @@ def _gc(args: argparse.Namespace) -> int:
         print(f"pbdag gc: scene {scene_id} kept whole, its state cannot be read: {reason}")
     if not args.dry_run:
         print(f"pbdag gc: {report.blobs_deleted} blobs deleted from the blob store")
+    swept = (report.swept_collected, report.swept_unnamed, report.swept_leftovers)
+    if any(swept):
+        print(
+            f"pbdag gc: the sweep {verb} {swept[0]} blobs of batches collected earlier, "
+            f"{swept[1]} blobs that no batch names and {swept[2]} leftovers of interrupted writes"
+        )
     return 0
 
 

@@ -23,6 +23,16 @@ Collecting is two steps, so that it is safe while the service runs:
 2. after the commit, the blobs that no uncollected row holds any more are deleted through the
    `BlobStore` protocol. A worker only claims queued batches, which are never marked, and a
    blob written since the compact format is held by one row only (the scene is in it).
+
+A gc killed between the two steps leaves blobs whose rows are all collected, and an API killed
+between writing a folder blob and committing its row leaves a blob no row names. So every gc
+then **sweeps** the blob store: a blob whose rows are all collected is deleted at once (no row
+can take it back), a blob that no row names once it is `ORPHAN_GRACE_SECONDS` old (younger, it
+may belong to a batch being queued right now), and the temp files of interrupted writes
+(`pbdag blobs migrate`, a killed `put`) once they are as old. The sweep lists the blobs before
+it reads the rows: on PostgreSQL a blob commits with its row, so a listed blob's row is visible.
+A blob is deleted only after every row that names it is marked collected, so no row that a
+worker may claim ever points at a deleted blob.
 """
 
 from __future__ import annotations
@@ -30,12 +40,17 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from itertools import islice
+
+import sqlalchemy as sa
 
 from core.graph import pending_verifications
 from core.planner import unresolved_fixtures
 from pbdag_errors import Refused
 from service.bootstrap import Container
+from service.store.engine import read_transaction
 from service.store.queue_records import BatchRecord
+from service.store.tables import batches
 
 
 @dataclass
@@ -51,6 +66,11 @@ class GcReport:
     unreadable_scenes: dict[str, str] = field(default_factory=dict)
     bytes_freed: int = 0  # the blob bytes of the batches collected
     blobs_deleted: int = 0  # blobs removed from the store (0 on a dry run)
+    # The sweep (see above): blobs whose rows were collected by an interrupted gc, blobs no row
+    # names, temp files of interrupted writes (what a dry run would remove, on a dry run).
+    swept_collected: int = 0
+    swept_unnamed: int = 0
+    swept_leftovers: int = 0
 
     @property
     def batches(self) -> int:
@@ -99,6 +119,7 @@ def collect(
             report.expired.append(record)
     if dry_run:
         report.bytes_freed = sum(record.blob_bytes for record in report.expired)
+        sweep(container, report, clock())
         return report
     marked, deletable = container.queue.mark_collected([record.id for record in report.expired])
     marked_ids = {item.id for item in marked}
@@ -107,4 +128,42 @@ def collect(
     report.bytes_freed = sum(item.blob_bytes for item in marked)
     for key in sorted(deletable):
         report.blobs_deleted += container.blobs.delete(key)
+    sweep(container, report, clock())
     return report
+
+
+# A blob no row names may be a batch's being queued now (the folder writes it before the row).
+ORPHAN_GRACE_SECONDS = 3600.0
+SWEEP_CHUNK = 500
+
+
+def sweep(container: Container, report: GcReport, now: float) -> None:
+    """Delete the blobs no uncollected row holds, then the leftovers of interrupted writes
+    (counted in `report`; a dry run counts the blobs and deletes nothing)."""
+    cutoff = now - ORPHAN_GRACE_SECONDS
+    listed = container.blobs.keys()  # each chunk listed before its rows are read (see above)
+    while chunk := list(islice(listed, SWEEP_CHUNK)):
+        held = _holders(container.engine, chunk)
+        for key in chunk:
+            if held.get(key) is True:
+                continue
+            if key in held:  # named by collected rows only
+                report.swept_collected += report.dry_run or container.blobs.delete(key)
+                continue
+            stored = container.blobs.stored_at(key)
+            if stored is not None and stored < cutoff:
+                report.swept_unnamed += report.dry_run or container.blobs.delete(key)
+    if not report.dry_run:
+        report.swept_leftovers = container.blobs.remove_leftovers(cutoff)
+
+
+def _holders(engine: sa.Engine, keys: list[str]) -> dict[str, bool]:
+    """For each key some row names: True when an uncollected row holds it."""
+    held = sa.func.max(sa.case((batches.c.blob_collected_at.is_(None), 1), else_=0))
+    with read_transaction(engine) as connection:
+        rows = connection.execute(
+            sa.select(batches.c.blob_key, held)
+            .where(batches.c.blob_key.in_(keys))
+            .group_by(batches.c.blob_key)
+        ).all()
+    return {str(key): bool(value) for key, value in rows}

@@ -9,7 +9,7 @@ batch's blob with its row (`BatchQueue.submit`):
   share nothing but the database.
 - `FileBlobStore` writes the file durably (fsync, rename) before that transaction opens (SQLite's
   write lock is not held over the fsync): a queued batch always has its blob; a crash before the
-  commit may leave a file that no batch names, which `keys()` lists for a garbage collector.
+  commit may leave a file that no batch names, which `keys()` lists for `pbdag gc`'s sweep.
 """
 
 from __future__ import annotations
@@ -83,6 +83,15 @@ class BlobStore(Protocol):
         """Every stored key, in no particular order."""
         ...
 
+    def stored_at(self, key: str) -> float | None:
+        """When the blob was last stored (unix seconds), None when there is none."""
+        ...
+
+    def remove_leftovers(self, stored_before: float) -> int:
+        """Remove what interrupted writes left behind before that time (a killed `put` or
+        `pbdag blobs migrate`); how many. Nothing on a store whose writes are transactions."""
+        ...
+
 
 def blob_key(content: bytes) -> str:
     """The key of `content`: its sha256 in hex."""
@@ -108,6 +117,9 @@ class FileBlobStore:
         path = self._path(key)
         with _disk_failures("writing a blob"):
             if path.exists():
+                # Stored again: refreshed, so that gc's sweep of blobs no row names leaves it to
+                # the row being written now.
+                os.utime(path)
                 return key
             path.parent.mkdir(parents=True, exist_ok=True)
             # Write to a temp file, fsync, then rename, so a crash never leaves a torn blob.
@@ -148,6 +160,27 @@ class FileBlobStore:
         for path in self.root.glob("??/??/*"):
             if _KEY.match(path.name) and path.is_file():
                 yield path.name
+
+    def stored_at(self, key: str) -> float | None:
+        """The blob file's modification time (a `put` of stored bytes refreshes it)."""
+        with _disk_failures("reading a blob's time"):
+            try:
+                return self._path(key).stat().st_mtime
+            except FileNotFoundError:
+                return None
+
+    def remove_leftovers(self, stored_before: float) -> int:
+        """Delete `.incoming-*` temp files last written before that time."""
+        removed = 0
+        with _disk_failures("removing a blob's leftovers"):
+            for path in self.root.glob("??/??/.incoming-*"):
+                try:
+                    if path.stat().st_mtime < stored_before:
+                        path.unlink()
+                        removed += 1
+                except FileNotFoundError:  # another gc, or the put it belonged to, got there
+                    continue
+        return removed
 
 
 @contextmanager
@@ -237,6 +270,18 @@ class PgBlobStore:
             for key in result.scalars():
                 yield str(key)
 
+    def stored_at(self, key: str) -> float | None:
+        """The blob row's `created_at`."""
+        with self.engine.connect() as connection:
+            value = connection.execute(
+                sa.select(blobs.c.created_at).where(blobs.c.key == key)
+            ).scalar()
+        return None if value is None else float(value)
+
+    def remove_leftovers(self, stored_before: float) -> int:
+        """Nothing: a blob row commits whole or not at all."""
+        return 0
+
 
 class MemoryBlobStore:
     """In-memory blobs for tests."""
@@ -245,11 +290,13 @@ class MemoryBlobStore:
 
     def __init__(self) -> None:
         self._blobs: dict[str, bytes] = {}
+        self._stored: dict[str, float] = {}
 
     def put(self, content: bytes, connection: sa.Connection | None = None) -> str:
         """Store `content` and return its key."""
         key = blob_key(content)
         self._blobs[key] = content
+        self._stored[key] = time.time()
         return key
 
     def get(self, key: str) -> bytes:
@@ -266,3 +313,11 @@ class MemoryBlobStore:
     def keys(self) -> Iterator[str]:
         """Every stored key."""
         yield from list(self._blobs)
+
+    def stored_at(self, key: str) -> float | None:
+        """When `put` last stored it."""
+        return self._stored.get(key) if key in self._blobs else None
+
+    def remove_leftovers(self, stored_before: float) -> int:
+        """Nothing: memory leaves no leftovers."""
+        return 0

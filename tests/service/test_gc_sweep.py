@@ -1,0 +1,137 @@
+"""`pbdag gc` interrupted at each step, and blobs no batch names: the next gc sweeps them, and no
+row a worker may claim ever points at a deleted blob (on every store backend)."""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from fastapi.testclient import TestClient
+
+from service.app import create_app
+from service.bootstrap import Container
+from service.retention import ORPHAN_GRACE_SECONDS, collect
+from service.store.blobs import BlobNotFound, FileBlobStore
+from service.worker import Worker
+from tests.clients import local_client
+from tests.wire_scenes import batch
+
+
+class Killed(BaseException):
+    """The process died here (not an Exception: nothing may catch it on the way out)."""
+
+
+@pytest.fixture
+def client(container: Container) -> Iterator[TestClient]:
+    with local_client(create_app(container, run_worker=False)) as test_client:
+        yield test_client
+
+
+def posted_and_done(client: TestClient, container: Container, count: int) -> str:
+    scene_id = str(client.post("/v1/scenes", json={"name": "gc"}).json()["id"])
+    for index in range(count):
+        body = batch(f"b{index}", index)
+        assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code == 202
+    assert Worker(container).drain() == count
+    return scene_id
+
+
+def consistent(container: Container, scene_id: str) -> set[str]:
+    """Every row not collected has its blob; every blob is held by a row not collected.
+    Returns the blob keys."""
+    keys = set(container.blobs.keys())
+    records = container.queue.of_scene(scene_id)
+    held = {r.blob_key for r in records if r.blob_collected_at is None}
+    assert held <= keys, "a row a worker may claim points at a missing blob"
+    assert keys <= held, f"{len(keys - held)} blobs without a row that holds them"
+    return keys
+
+
+def test_gc_killed_between_marking_and_deleting_is_finished_by_the_next(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    scene_id = posted_and_done(client, container, 3)
+    original = container.blobs.delete
+    deleted: list[str] = []
+
+    def killed_after_one(key: str) -> bool:
+        if deleted:
+            raise Killed
+        deleted.append(key)
+        return original(key)
+
+    monkeypatch.setattr(container.blobs, "delete", killed_after_one)
+    with pytest.raises(Killed):
+        collect(container, 0.0, clock=lambda: time.time() + 10)
+    monkeypatch.setattr(container.blobs, "delete", original)
+    records = container.queue.of_scene(scene_id)
+    assert all(r.blob_collected_at is not None for r in records)  # all marked
+    assert len(set(container.blobs.keys())) == 2  # but two blobs outlived the kill
+
+    report = collect(container, 0.0, clock=lambda: time.time() + 10)
+    assert report.batches == 0 and report.swept_collected == 2 and report.swept_unnamed == 0
+    assert consistent(container, scene_id) == set()
+    assert collect(container, 0.0).swept_collected == 0  # nothing left
+
+
+def test_gc_killed_before_marking_leaves_everything_for_the_next(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    scene_id = posted_and_done(client, container, 2)
+
+    def killed(ids: list[int]) -> None:
+        raise Killed
+
+    monkeypatch.setattr(container.queue, "mark_collected", killed)
+    with pytest.raises(Killed):
+        collect(container, 0.0, clock=lambda: time.time() + 10)
+    monkeypatch.undo()
+    assert len(consistent(container, scene_id)) == 2  # nothing marked, nothing deleted
+    assert collect(container, 0.0, clock=lambda: time.time() + 10).blobs_deleted == 2
+    assert consistent(container, scene_id) == set()
+
+
+def test_a_blob_no_row_names_is_swept_once_past_the_grace(
+    client: TestClient, container: Container
+) -> None:
+    scene_id = posted_and_done(client, container, 1)
+    assert client.post(f"/v1/scenes/{scene_id}/batches", json=batch("queued", 5)).status_code == 202
+    orphan = container.blobs.put(b"a batch whose row never committed")
+    young = collect(container, 10**9)  # retention far away: nothing expires
+    assert young.swept_unnamed == 0 and container.blobs.get(orphan)
+    later = time.time() + ORPHAN_GRACE_SECONDS + 60
+    dry = collect(container, 10**9, dry_run=True, clock=lambda: later)
+    assert dry.swept_unnamed == 1 and container.blobs.get(orphan)
+    report = collect(container, 10**9, clock=lambda: later)
+    assert report.swept_unnamed == 1
+    with pytest.raises(BlobNotFound):
+        container.blobs.get(orphan)
+    assert len(consistent(container, scene_id)) == 2  # the done and the queued batch's blobs
+    assert Worker(container).drain() == 1  # the queued batch still has its body
+
+
+def test_leftovers_of_interrupted_writes_go_once_past_the_grace(tmp_path: Path) -> None:
+    store = FileBlobStore(tmp_path / "blobs")
+    key = store.put(b"kept")
+    shard = tmp_path / "blobs" / key[:2] / key[2:4]
+    old, fresh = shard / ".incoming-old", shard / ".incoming-fresh"
+    old.write_bytes(b"half a blob")
+    fresh.write_bytes(b"a blob being written")
+    long_ago = time.time() - ORPHAN_GRACE_SECONDS - 60
+    os.utime(old, (long_ago, long_ago))
+    assert store.remove_leftovers(time.time() - ORPHAN_GRACE_SECONDS) == 1
+    assert not old.exists() and fresh.exists() and store.get(key) == b"kept"
+
+
+def test_storing_bytes_again_refreshes_the_blob_for_the_sweep(tmp_path: Path) -> None:
+    store = FileBlobStore(tmp_path / "blobs")
+    key = store.put(b"posted twice")
+    path = tmp_path / "blobs" / key[:2] / key[2:4] / key
+    long_ago = time.time() - ORPHAN_GRACE_SECONDS - 60
+    os.utime(path, (long_ago, long_ago))
+    store.put(b"posted twice")
+    stored = store.stored_at(key)
+    assert stored is not None and stored > time.time() - 60
