@@ -45,6 +45,7 @@ from service.store.errors import (
     ConcurrencyConflict,
     SceneQuarantined,
     SeqOutOfRange,
+    StoreUnavailable,
     UnreadableEvent,
 )
 from service.store.queue_records import NotRequeueable, QueueFull, QuotaExceeded, RawBatchCollected
@@ -88,8 +89,11 @@ PROBLEMS: dict[type[Exception], Problem] = {
     RateLimitExceeded: Problem(429, "Too Many Requests", "/problems/rate-limited"),
     QueueFull: Problem(429, "Too Many Requests", "/problems/queue-full"),
     QuotaExceeded: Problem(507, "Insufficient Storage", "/problems/quota-exceeded"),
+    StoreUnavailable: Problem(503, "Service Unavailable", "/problems/store-unavailable"),
     Failure: INTERNAL,
 }
+# A lost database connection or a full disk may pass: the client is told to retry after this.
+STORE_RETRY_AFTER_SECONDS = 2
 
 
 def headers_of(error: PbdagError) -> dict[str, str] | None:
@@ -105,6 +109,8 @@ def headers_of(error: PbdagError) -> dict[str, str] | None:
             return {"WWW-Authenticate": challenge}
         case RateLimitExceeded(retry_after=seconds) | QueueFull(retry_after=seconds):
             return {"Retry-After": str(seconds)}
+        case StoreUnavailable():
+            return {"Retry-After": str(STORE_RETRY_AFTER_SECONDS)}
     return None
 
 
@@ -145,6 +151,9 @@ def reported(error: PbdagError) -> Response:
     problem = problem_of(error)
     if problem is INTERNAL:
         return problem_response(INTERNAL, "the server failed to process the request")
+    if isinstance(error, StoreUnavailable):  # the driver's words stay in the server's log
+        detail = "the database or the blob store is unavailable for a moment; retry"
+        return problem_response(problem, detail, headers=headers_of(error))
     return problem_response(problem, error.detail, error.field, headers=headers_of(error))
 
 
@@ -161,6 +170,8 @@ async def _handle_reported(request: Request, exc: Exception) -> Response:
     assert isinstance(exc, PbdagError)
     if problem_of(exc) is INTERNAL:  # the server failed: the log keeps what the answer hides
         logger.error("%s on %s %s", exc.detail, request.method, request.url.path, exc_info=exc)
+    elif isinstance(exc, StoreUnavailable):
+        logger.warning("%s on %s %s (answered 503)", exc.detail, request.method, request.url.path)
     return reported(exc)
 
 

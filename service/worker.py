@@ -18,6 +18,7 @@ import os
 import random
 import socket
 import threading
+import time
 import uuid
 from collections import OrderedDict
 from collections.abc import Iterator
@@ -49,6 +50,12 @@ def worker_name() -> str:
     return f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:8]}"
 
 
+def operator_cause(error: BaseException) -> str:
+    """What failed, for the operator (the store's own words, never a batch's content)."""
+    text = error.detail if isinstance(error, PbdagError) else f"{type(error).__name__}: {error}"
+    return text[:MAX_ERROR_CHARS]
+
+
 def short_error(error: BaseException) -> tuple[str, bool]:
     """(the message a client may read, whether a retry may succeed)."""
     if isinstance(error, TRANSIENT):
@@ -65,8 +72,21 @@ def short_error(error: BaseException) -> tuple[str, bool]:
     return message[:MAX_ERROR_CHARS], False
 
 
+@dataclasses.dataclass(frozen=True)
+class WorkerHealth:
+    """Whether the worker can record what it does; when not, why and since when."""
+
+    healthy: bool = True
+    problem: str | None = None
+    since: float | None = None
+
+
 class Worker:
-    """Processes queued batches, one scene's batches in arrival order."""
+    """Processes queued batches, one scene's batches in arrival order.
+
+    A worker that cannot write (a full disk, a read-only or lost database) keeps each failure
+    it could not record and records it before it claims anything else, once writing works
+    again; meanwhile it claims nothing and `health` says why."""
 
     def __init__(
         self, container: Container, name: str | None = None, seed: int | None = None
@@ -75,12 +95,22 @@ class Worker:
         self.name = name or worker_name()
         self._states: OrderedDict[str, SceneState] = OrderedDict()
         self._random = random.Random(seed)
+        self._unrecorded: dict[int, tuple[Claim, str, bool]] = {}  # by batch row id
+        self.health = WorkerHealth()
+
+    def _unhealthy(self, problem: str) -> None:
+        if self.health.healthy or self.health.problem != problem:
+            self.health = WorkerHealth(False, problem, self.health.since or time.time())
 
     def run_once(self) -> bool:
-        """Settle expired leases, then process one batch; False when none was due."""
+        """Record the failures not yet recorded, settle expired leases, then process one batch;
+        False when none was due (or the worker cannot write)."""
         settings = self.container.settings
+        if not self._record_unrecorded():
+            return False
         self.settle_expired()
         claim = self.container.queue.claim(self.name, settings.lease_seconds)
+        self._recovered("cannot reach")
         if claim is None:
             return False
         self.process(claim)
@@ -92,8 +122,9 @@ class Worker:
         while not stop.is_set():
             try:
                 busy = self.run_once()
-            except Exception:  # the database may be briefly unavailable; keep the worker alive
-                logger.exception("worker %s: queue error", self.name)
+            except Exception as error:  # the database may be unavailable; keep the worker alive
+                self._unhealthy(f"cannot reach the queue: {operator_cause(error)}")
+                logger.error("worker %s: queue error: %s", self.name, operator_cause(error))
                 busy = False
             if not busy:
                 stop.wait(self.container.settings.worker_poll_seconds)
@@ -136,6 +167,7 @@ class Worker:
             self._failed(claim, error)
             return
         metrics.batches_processed.labels("done").inc()
+        self.health = WorkerHealth()
         logger.info(
             "batch %s of scene %s done: %d events%s",
             claim.batch_id,
@@ -166,15 +198,50 @@ class Worker:
             exc_info=not transient or logger.isEnabledFor(logging.DEBUG),
         )
         try:
-            if transient and claim.attempts < self.container.settings.max_attempts:
-                self.container.queue.retry_later(claim, message, self.retry_delay(claim.attempts))
-                self.container.metrics.batches_processed.labels("retry").inc()
-            else:
-                self.skip(claim, message)
+            self._record(claim, message, transient)
         except LeaseLost:
             logger.warning("batch %s: lease lost before recording %s", claim.batch_id, message)
-        except Exception:
-            logger.exception("batch %s: could not record its failure", claim.batch_id)
+        except Exception as error:
+            self._unrecorded[claim.id] = (claim, message, transient)
+            cause = operator_cause(error)
+            self._unhealthy(f"cannot record the failure of batch {claim.batch_id}: {cause}")
+            logger.error(
+                "batch %s: could not record its failure (%s); recorded once writing works again",
+                claim.batch_id,
+                cause,
+            )
+
+    def _record(self, claim: Claim, message: str, transient: bool) -> None:
+        if transient and claim.attempts < self.container.settings.max_attempts:
+            self.container.queue.retry_later(claim, message, self.retry_delay(claim.attempts))
+            self.container.metrics.batches_processed.labels("retry").inc()
+        else:
+            self.skip(claim, message)
+
+    def _record_unrecorded(self) -> bool:
+        """Record the failures kept while writing failed; False while that still fails."""
+        for key, (claim, message, transient) in list(self._unrecorded.items()):
+            try:
+                self._record(claim, message, transient)
+            except LeaseLost:
+                pass  # another worker settled it when the lease expired
+            except Exception as error:
+                cause = operator_cause(error)
+                self._unhealthy(f"cannot record the failure of batch {claim.batch_id}: {cause}")
+                return False
+            del self._unrecorded[key]
+            logger.info("batch %s: its failure is recorded now: %s", claim.batch_id, message)
+        self._recovered("cannot record")
+        return True
+
+    def _recovered(self, problem: str) -> None:
+        if (self.health.problem or "").startswith(problem):
+            self.health = WorkerHealth()
+
+    @property
+    def unrecorded(self) -> int:
+        """Failures the worker holds because it could not record them yet."""
+        return len(self._unrecorded)
 
     def retry_delay(self, attempts: int) -> float:
         """Exponential backoff with jitter: base * 2^(attempts - 1), capped, times 0.5-1.5."""
