@@ -10,7 +10,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from ingest.frames import FrameSource, IngestError
+from ingest.frames import FrameSource, IngestError, one_line
 from ingest.sink import SinkError
 
 DEFAULT_URL = "http://127.0.0.1:8000"
@@ -29,7 +29,7 @@ def needs_ingest_extra(
     handler: Callable[[argparse.Namespace], int],
 ) -> Callable[[argparse.Namespace], int]:
     """The handler, run only when the `ingest` extra is installed (else one line saying so); an
-    input or service error ends it with one line and status 2."""
+    input or service error ends it with one line (control characters escaped) and status 2."""
 
     def checked(args: argparse.Namespace) -> int:
         missing = missing_ingest_extra()
@@ -43,7 +43,7 @@ def needs_ingest_extra(
         try:
             return handler(args)
         except (IngestError, SinkError) as error:
-            print(f"pbdag ingest: error: {error}", file=sys.stderr)
+            print(f"pbdag ingest: error: {one_line(str(error))}", file=sys.stderr)
             return 2
 
     return checked

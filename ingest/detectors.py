@@ -20,11 +20,22 @@ from typing import Any, Literal, Protocol
 import numpy as np
 import numpy.typing as npt
 import yaml
-from PIL import Image
 
+from ingest.checks import (
+    BadFile,
+    bad_file_error,
+    frame_error,
+    library_reason,
+    open_png,
+    outside_problem,
+)
 from ingest.frames import FrameSource, IngestError, SkipFrame, SourceFrame
+from ingest.messages import image_array
 
 ENTRY_POINT_GROUP = "pbdag.detectors"
+INSTANCE_MODES = frozenset({"L", "P", "I", "I;16", "I;16B"})
+MAX_LABEL_MAP_BYTES = 10 * 2**20  # a label map names classes: a few kilobytes
+INSTANCE_PNG_FIX = "write the frame's single-channel instance PNG there, or delete it"
 Kind = Literal["object", "fixture"]
 logger = logging.getLogger(__name__)
 
@@ -114,11 +125,17 @@ def load_label_map(path: Path) -> dict[int, LabelEntry]:
     """
     if not path.is_file():
         raise IngestError(f"label map {path} does not exist")
-    text = path.read_text()
+    with path.open("rb") as file:
+        data = file.read(MAX_LABEL_MAP_BYTES + 1)
+    if len(data) > MAX_LABEL_MAP_BYTES:
+        raise IngestError(f"label map {path} is larger than {MAX_LABEL_MAP_BYTES} bytes")
     try:
+        text = data.decode("utf-8")
         raw = json.loads(text) if path.suffix.lower() == ".json" else yaml.safe_load(text)
+    except UnicodeDecodeError as error:
+        raise IngestError(f"label map {path} is not UTF-8 text") from error
     except (json.JSONDecodeError, yaml.YAMLError) as error:
-        raise IngestError(f"label map {path} cannot be parsed: {error}") from error
+        raise IngestError(f"label map {path} cannot be parsed ({_parse_problem(error)})") from error
     if not isinstance(raw, dict) or not raw:
         raise IngestError(f"label map {path} must be a non-empty mapping of id -> class name")
     entries = {}
@@ -133,6 +150,14 @@ def load_label_map(path: Path) -> dict[int, LabelEntry]:
             )
         entries[instance_id] = _label_entry(value, f"label map {path}: id {instance_id}")
     return entries
+
+
+def _parse_problem(error: json.JSONDecodeError | yaml.YAMLError) -> str:
+    """Where and why a label map does not parse, without the quoted lines YAML adds."""
+    problem, mark = getattr(error, "problem", None), getattr(error, "problem_mark", None)
+    if problem and mark is not None:
+        return f"line {mark.line + 1}, column {mark.column + 1}: {problem}"
+    return library_reason(error)
 
 
 def _label_entry(value: object, where: str) -> LabelEntry:
@@ -203,8 +228,6 @@ class LabelImageDetector:
 
     def detect(self, frame: SourceFrame, source: FrameSource) -> list[Detection]:
         """The labelled instances of the label image synchronised to the frame."""
-        from ingest.rosbag import image_array  # bags only: folders never reach here
-
         message = frame.messages.get(self.topic)
         if message is None:
             raise SkipFrame(f"no {self.topic} message near the depth stamp")
@@ -241,10 +264,21 @@ class InstancePngsDetector:
         except (KeyError, IndexError, ValueError) as error:
             raise IngestError(f"--detector-option pattern={self.pattern!r}: {error}") from error
         path = self.folder / name
+        label = f"frame {frame.index}"
+        outside = outside_problem(path, self.folder)
+        if outside is not None:
+            fix = f"copy the file into {self.folder} instead of linking to it"
+            raise frame_error(label, path, outside, fix)
         if not path.is_file():
             raise SkipFrame("no instance PNG")
-        with Image.open(path) as image:
-            if image.mode not in ("L", "P", "I", "I;16", "I;16B"):
-                raise IngestError(f"{path}: instance PNGs must be single-channel, got {image.mode}")
-            instances = np.asarray(image)
+        try:
+            with open_png(path) as image:
+                if image.mode not in INSTANCE_MODES:
+                    raise BadFile(f"is not single-channel (Pillow mode {image.mode})")
+                instances = np.asarray(image)
+        except BadFile as bad:
+            raise bad_file_error(label, path, bad, INSTANCE_PNG_FIX) from bad
+        except Exception as error:  # Pillow reports corrupt data through many types
+            problem = f"is truncated or corrupt ({type(error).__name__})"
+            raise frame_error(label, path, problem, INSTANCE_PNG_FIX) from error
         return self.masks.detections(instances, frame, str(path))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,8 +15,13 @@ from pbdag_errors import Refused
 
 
 class IngestError(Refused):
-    """A problem with the user's input (a missing file or topic, a bad option): a clear message,
-    no traceback."""
+    """A problem with the user's input (a missing file or topic, a bad option, a bad frame): one
+    line that never quotes a file's content, no traceback."""
+
+
+def one_line(text: str) -> str:
+    """`text` with its control characters (newlines included) written as escapes."""
+    return re.sub(r"[\x00-\x1f\x7f]", lambda match: repr(match.group())[1:-1], text)
 
 
 class SkipFrame(Exception):
@@ -94,6 +100,11 @@ class FrameSource(Protocol):
 
     def expected_frames(self) -> int | None:
         """How many frames `frames()` will try (for the progress bar), when known."""
+        ...
+
+    def check(self, extra_topics: tuple[str, ...] = ()) -> None:
+        """Go over the frames `frames()` would yield, keeping none, and raise IngestError for the
+        first bad one (a file, pose, intrinsics or image size), so that nothing is sent."""
         ...
 
     def frames(self, extra_topics: tuple[str, ...] = ()) -> Iterator[SourceFrame]:

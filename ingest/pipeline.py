@@ -84,9 +84,13 @@ def ingest(
     prefix: str | None = None,
     progress: bool = True,
 ) -> IngestSummary:
-    """Send every usable frame of `source`, with `detector`'s detections, to the scene."""
+    """Check every frame of `source`, then send every usable one, with `detector`'s detections,
+    to the scene."""
     summary = IngestSummary()
     topics = detector.topics if detector is not None else ()
+    # Every frame is checked before the first request: a bad file, pose, intrinsics or image
+    # size is reported before the scene is created or a batch is posted.
+    source.check(topics)
     bar = tqdm(total=source.expected_frames(), unit="frame", disable=not progress, leave=True)
 
     detector_skips: dict[str, int] = {}
@@ -108,8 +112,8 @@ def ingest(
             bar.update(selected() - bar.n)
 
     try:
-        # The first frame before the first request: a missing topic, frame or file is reported
-        # before anything reaches the service (no empty scene is left behind).
+        # The first frame (and its detections) before the first request: a detector that cannot
+        # run is reported before anything reaches the service (no empty scene is left behind).
         frames = wire_frames()
         first = next(frames, None)
         if first is not None:

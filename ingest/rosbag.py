@@ -5,6 +5,12 @@ the nearest `sensor_msgs/CameraInfo` and a camera-to-map pose, either composed a
 (/tf and /tf_static) or taken from an odometry topic (`nav_msgs/Odometry`) times a fixed
 camera-in-base transform. Poses and detector topics are matched to the depth image's header
 stamp: the nearest message within a tolerance, otherwise the frame is skipped and counted.
+
+`check()` reads the bag once before anything is sent, as `frames()` does, keeping nothing: every
+selected depth image (encoding, size within `MAX_IMAGE_SIDE`, data length, the camera info's
+size), its intrinsics, its pose (finite and rigid) and whether its detector topics have a message
+near it; a bag that cannot be read, opened or deserialised is one error naming the bag and topic.
+Only the detector topics' messages themselves are left to the detector, when frames are sent.
 """
 
 from __future__ import annotations
@@ -16,10 +22,10 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from rosbags.highlevel import AnyReader, AnyReaderError
 from rosbags.interfaces import Connection
-from rosbags.typesys import Stores, get_typestore
 
+from ingest.bag_reader import BagReader, open_bag
+from ingest.checks import frame_error, intrinsics_problem, pose_problem
 from ingest.frames import (
     CameraIntrinsics,
     IngestError,
@@ -27,14 +33,15 @@ from ingest.frames import (
     SourceFrame,
     check_reading_options,
     frame_window,
+    one_line,
 )
+from ingest.messages import image_array, intrinsics_of, pose_of, stamp_ns, transform_of
 from ingest.transforms import (
     DisconnectedFrames,
     Matrix,
     TransformLookupError,
     TransformTree,
     nearest,
-    rigid,
 )
 
 IMAGE = "sensor_msgs/msg/Image"
@@ -43,6 +50,12 @@ TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF_TOPIC, TF_STATIC_TOPIC = "/tf", "/tf_static"
 INT64_MAX = 2**63 - 1
+DEPTH_ENCODINGS = frozenset({"16UC1", "mono16", "32FC1"})
+DEPTH_FIX = "record depth as 16UC1/mono16 or 32FC1, the size its camera info gives"
+CAMERA_INFO_FIX = (
+    "record the depth camera's calibration on the camera info topic (K: focal lengths "
+    "positive, principal point inside the image)"
+)
 # (depth stamp in ns, the depth image's frame_id) -> camera-to-map pose
 Poser = Callable[[int, str], Matrix]
 
@@ -68,65 +81,6 @@ class OdomPose:
     topic: str
     camera_in_base: Matrix | None = None
     camera_frame: str | None = None
-
-
-def stamp_ns(header: Any) -> int:
-    """Nanoseconds of a std_msgs/Header stamp."""
-    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-
-
-def image_array(message: Any, topic: str) -> npt.NDArray[Any]:
-    """The pixels of a sensor_msgs/Image as a 2D array (uint16, float32 or an integer label)."""
-    encodings: dict[str, str] = {
-        "16UC1": "u2",
-        "mono16": "u2",
-        "32FC1": "f4",
-        "8UC1": "u1",
-        "mono8": "u1",
-        "32SC1": "i4",
-        "16SC1": "i2",
-    }
-    code = encodings.get(message.encoding)
-    if code is None:
-        raise IngestError(
-            f"topic {topic}: image encoding {message.encoding!r} is not supported "
-            f"(one of {', '.join(encodings)})"
-        )
-    dtype = np.dtype(code).newbyteorder(">" if message.is_bigendian else "<")
-    height, width, step = int(message.height), int(message.width), int(message.step)
-    raw = np.asarray(message.data, dtype=np.uint8)
-    if step < width * dtype.itemsize or raw.size < step * height:
-        raise IngestError(
-            f"topic {topic}: image data of {raw.size} bytes does not hold {height} rows of "
-            f"step {step}"
-        )
-    rows = raw[: step * height].reshape(height, step)[:, : width * dtype.itemsize]
-    return (
-        np.ascontiguousarray(rows)
-        .view(dtype)
-        .reshape(height, width)
-        .astype(dtype.newbyteorder("="))
-    )
-
-
-def intrinsics_of(message: Any) -> CameraIntrinsics:
-    """Pinhole intrinsics of a sensor_msgs/CameraInfo (K row-major: fx 0 cx, 0 fy cy, 0 0 1)."""
-    k = [float(value) for value in message.k]
-    return CameraIntrinsics(
-        width=int(message.width), height=int(message.height), fx=k[0], fy=k[4], cx=k[2], cy=k[5]
-    )
-
-
-def transform_of(transform: Any) -> Matrix:
-    """4x4 matrix of a geometry_msgs/Transform."""
-    t, q = transform.translation, transform.rotation
-    return rigid((t.x, t.y, t.z), (q.x, q.y, q.z, q.w))
-
-
-def pose_of(pose: Any) -> Matrix:
-    """4x4 matrix of a geometry_msgs/Pose."""
-    p, q = pose.position, pose.orientation
-    return rigid((p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
 
 
 class RosbagSource:
@@ -159,91 +113,55 @@ class RosbagSource:
         self.counts = SourceCounts()
         self._depth_count: int | None = None
 
-    def _open(self) -> AnyReader:
-        try:
-            return AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
-        except AnyReaderError as error:
-            raise IngestError(f"bag {self.path} cannot be read: {error}") from error
-
-    def _connections(
-        self, reader: AnyReader, topic: str, msgtype: str, role: str
-    ) -> list[Connection]:
-        """The connections of `topic`, checked to exist with the expected type."""
-        found = [c for c in reader.connections if c.topic == topic]
-        if not found:
-            topics = sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections})
-            raise IngestError(
-                f"{role} topic {topic!r} is not in bag {self.path}; its topics: {', '.join(topics)}"
-            )
-        wrong = sorted({c.msgtype for c in found if c.msgtype != msgtype})
-        if wrong:
-            raise IngestError(f"{role} topic {topic!r} has type {wrong[0]}, expected {msgtype}")
-        return found
-
     def expected_frames(self) -> int | None:
         """Depth messages the stride and limit select (known once the bag was opened)."""
         if self._depth_count is None:
-            with self._open() as reader:
-                connections = self._connections(reader, self.depth_topic, IMAGE, "depth")
+            with open_bag(self.path) as bag:
+                connections = bag.connections_of(self.depth_topic, IMAGE, "depth")
                 self._depth_count = sum(c.msgcount for c in connections)
         selected = len(range(0, self._depth_count, self.stride))
         return selected if self.limit is None else min(selected, self.limit)
 
+    def check(self, extra_topics: tuple[str, ...] = ()) -> None:
+        """Read every selected frame as `frames()` does (the detector topics' messages are only
+        looked up, not fetched), keeping none and counting nothing."""
+        for _ in self._frames(extra_topics, SourceCounts(), fetch=False):
+            pass
+
     def frames(self, extra_topics: tuple[str, ...] = ()) -> Iterator[SourceFrame]:
         """Each selected depth image, posed, with the extra topics' nearest messages."""
-        with self._open() as reader:
-            depth_connections = self._connections(reader, self.depth_topic, IMAGE, "depth")
-            infos = self._camera_infos(reader)
-            poser = self._poser(reader)
-            extras = {topic: self._index(reader, topic) for topic in extra_topics}
-            for position, (connection, _, raw) in enumerate(reader.messages(depth_connections)):
+        yield from self._frames(extra_topics, self.counts, fetch=True)
+
+    def _frames(
+        self, extra_topics: tuple[str, ...], counts: SourceCounts, *, fetch: bool
+    ) -> Iterator[SourceFrame]:
+        """The frames, skips counted in `counts`; with `fetch`, each with its extra messages."""
+        with open_bag(self.path) as bag:
+            depth_connections = bag.connections_of(self.depth_topic, IMAGE, "depth")
+            infos = self._camera_infos(bag)
+            poser = self._poser(bag)
+            extras = {topic: self._index(bag, topic) for topic in extra_topics}
+            depth_messages = bag.raw(depth_connections, self.depth_topic)
+            for position, (connection, _, raw) in enumerate(depth_messages):
                 take, stop = frame_window(position, self.stride, self.limit)
                 if stop:
                     return
                 if not take:
                     continue
-                image: Any = reader.deserialize(raw, connection.msgtype)
+                image: Any = bag.decoded(connection, raw, f"frame {position}")
                 stamp = stamp_ns(image.header)
-                # The nearest camera info at any distance: drivers may publish it once (latched),
-                # and intrinsics change only with the camera's mode.
-                info_index = nearest(infos[0], stamp, INT64_MAX)
-                assert info_index is not None  # there is at least one
-                intrinsics = infos[1][info_index]
-                camera_frame = str(image.header.frame_id)
-                try:
-                    pose = poser(stamp, camera_frame)
-                except DisconnectedFrames as error:
-                    raise IngestError(
-                        f"{error} (the camera frame is the depth images' frame_id "
-                        f"{camera_frame!r} unless --camera-frame names another)"
-                    ) from error
-                except TransformLookupError as error:
-                    self.counts.skip(f"no pose: {_shorten(str(error))}")
+                frame = f"frame {position} (t = {stamp / 1e9:.3f} s)"
+                intrinsics = self._intrinsics_at(infos, stamp, frame)
+                pose = self._pose_at(poser, stamp, str(image.header.frame_id), frame)
+                if isinstance(pose, str):
+                    counts.skip(pose)
                     continue
-                messages: dict[str, object] = {}
-                for topic, (stamps, bag_times, connections) in extras.items():
-                    found = nearest(stamps, stamp, self.sync_tolerance_ns)
-                    if found is None:
-                        break
-                    messages[topic] = self._fetch(
-                        reader, connections, bag_times[found], stamps[found]
-                    )
-                if len(messages) < len(extras):
-                    missing = next(t for t in extras if t not in messages)
-                    self.counts.skip(f"no {missing} message near the depth stamp")
+                messages = self._synchronised(bag, extras, stamp, fetch)
+                if isinstance(messages, str):
+                    counts.skip(messages)
                     continue
-                depth = image_array(image, self.depth_topic)
-                if depth.dtype not in (np.uint16, np.float32):
-                    raise IngestError(
-                        f"depth topic {self.depth_topic}: encoding {image.encoding!r} is not "
-                        "depth (16UC1, mono16 or 32FC1)"
-                    )
-                if (intrinsics.height, intrinsics.width) != depth.shape:
-                    raise IngestError(
-                        f"camera info {self.camera_info_topic} says {intrinsics.width}x"
-                        f"{intrinsics.height}, the depth images are {depth.shape[1]}x{depth.shape[0]}"
-                    )
-                self.counts.read += 1
+                depth = self._depth(image, intrinsics, frame)
+                counts.read += 1
                 yield SourceFrame(
                     index=position,
                     frame_id=f"{self.name}-{stamp}",
@@ -256,51 +174,126 @@ class RosbagSource:
                     messages=messages,
                 )
 
-    def _camera_infos(self, reader: AnyReader) -> tuple[list[int], list[CameraIntrinsics]]:
+    def _intrinsics_at(
+        self, infos: tuple[list[int], list[CameraIntrinsics]], stamp: int, frame: str
+    ) -> CameraIntrinsics:
+        """The checked intrinsics of the camera info nearest to `stamp` at any distance: drivers
+        may publish it once (latched), and intrinsics change only with the camera's mode."""
+        index = nearest(infos[0], stamp, INT64_MAX)
+        assert index is not None  # there is at least one
+        intrinsics = infos[1][index]
+        problem = intrinsics_problem(intrinsics)
+        if problem is not None:
+            at = f"t = {infos[0][index] / 1e9:.3f} s"
+            where = f"bag {self.path}, topic {self.camera_info_topic} at {at}"
+            raise frame_error(frame, where, problem, CAMERA_INFO_FIX)
+        return intrinsics
+
+    def _pose_at(self, poser: Poser, stamp: int, image_frame: str, frame: str) -> Matrix | str:
+        """The checked camera pose at `stamp`, or why the frame is skipped (no pose near it)."""
+        try:
+            pose = poser(stamp, image_frame)
+        except DisconnectedFrames as error:
+            raise IngestError(
+                f"{error} (the camera frame is the depth images' frame_id "
+                f"{image_frame!r} unless --camera-frame names another)"
+            ) from error
+        except TransformLookupError as error:
+            return f"no pose: {_shorten(str(error))}"
+        problem = pose_problem(pose)
+        if problem is not None:
+            source = self.pose_source
+            topics = (
+                f"{TF_TOPIC} and {TF_STATIC_TOPIC}" if isinstance(source, TfPose) else source.topic
+            )
+            fix = f"correct the pose messages of {topics} near t = {stamp / 1e9:.3f} s"
+            raise frame_error(frame, f"bag {self.path}, the pose from {topics}", problem, fix)
+        return pose
+
+    def _synchronised(
+        self,
+        bag: BagReader,
+        extras: dict[str, tuple[list[int], list[int], list[Connection]]],
+        stamp: int,
+        fetch: bool,
+    ) -> dict[str, object] | str:
+        """The extra topics' messages nearest to `stamp` (fetched only with `fetch`), or why the
+        frame is skipped (a topic has none within the sync tolerance)."""
+        messages: dict[str, object] = {}
+        for topic, (stamps, bag_times, connections) in extras.items():
+            found = nearest(stamps, stamp, self.sync_tolerance_ns)
+            if found is None:
+                return f"no {topic} message near the depth stamp"
+            if fetch:
+                messages[topic] = self._fetch(bag, connections, bag_times[found], stamps[found])
+        return messages
+
+    def _depth(self, image: Any, intrinsics: CameraIntrinsics, frame: str) -> npt.NDArray[Any]:
+        """The depth image's pixels, checked: a depth encoding, the camera info's size."""
+        where = f"{frame}: bag {self.path}, topic {self.depth_topic}"
+        if image.encoding not in DEPTH_ENCODINGS:
+            raise IngestError(
+                one_line(
+                    f"{where}: encoding {image.encoding!r} is not depth "
+                    f"(16UC1, mono16 or 32FC1); fix: {DEPTH_FIX}"
+                )
+            )
+        size = (int(image.height), int(image.width))
+        if (intrinsics.height, intrinsics.width) != size:
+            raise IngestError(
+                f"{where}: the depth image is {size[1]}x{size[0]}, camera info "
+                f"{self.camera_info_topic} says {intrinsics.width}x{intrinsics.height}; "
+                f"fix: {DEPTH_FIX}"
+            )
+        return image_array(image, self.depth_topic, where)
+
+    def _camera_infos(self, bag: BagReader) -> tuple[list[int], list[CameraIntrinsics]]:
         """Every camera info's stamp and intrinsics, by stamp."""
-        connections = self._connections(reader, self.camera_info_topic, CAMERA_INFO, "camera info")
-        pairs = []
-        for connection, _, raw in reader.messages(connections):
-            message: Any = reader.deserialize(raw, connection.msgtype)
-            pairs.append((stamp_ns(message.header), intrinsics_of(message)))
+        connections = bag.connections_of(self.camera_info_topic, CAMERA_INFO, "camera info")
+        pairs = [
+            (stamp_ns(message.header), intrinsics_of(message))
+            for _, message in bag.messages(connections, self.camera_info_topic)
+        ]
         pairs.sort(key=lambda pair: pair[0])
         if not pairs:
             raise IngestError(f"camera info topic {self.camera_info_topic!r} has no messages")
         return [stamp for stamp, _ in pairs], [intrinsics for _, intrinsics in pairs]
 
-    def _tree(self, reader: AnyReader, required: bool) -> TransformTree:
+    def _tree(self, bag: BagReader, required: bool) -> TransformTree:
         """The tf tree of /tf and /tf_static."""
         tree = TransformTree()
         topics = [
             (topic, topic == TF_STATIC_TOPIC)
             for topic in (TF_TOPIC, TF_STATIC_TOPIC)
-            if any(c.topic == topic for c in reader.connections)
+            if any(c.topic == topic for c in bag.connections)
         ]
         if required and not topics:
             raise IngestError(f"bag {self.path} has neither {TF_TOPIC} nor {TF_STATIC_TOPIC}")
         for topic, static in topics:
-            connections = self._connections(reader, topic, TF_MESSAGE, "transform")
-            for connection, _, raw in reader.messages(connections):
-                message: Any = reader.deserialize(raw, connection.msgtype)
+            connections = bag.connections_of(topic, TF_MESSAGE, "transform")
+            for _, message in bag.messages(connections, topic):
                 for stamped in message.transforms:
+                    parent, child = str(stamped.header.frame_id), str(stamped.child_frame_id)
+                    stamp = stamp_ns(stamped.header)
                     try:
-                        tree.add(
-                            str(stamped.header.frame_id),
-                            str(stamped.child_frame_id),
-                            stamp_ns(stamped.header),
-                            transform_of(stamped.transform),
-                            static=static,
-                        )
-                    except TransformLookupError as error:
-                        raise IngestError(f"topic {topic}: {error}") from error
+                        matrix = transform_of(stamped.transform)
+                        tree.add(parent, child, stamp, matrix, static=static)
+                    except (TransformLookupError, ValueError) as error:  # a zero quaternion
+                        raise IngestError(
+                            one_line(
+                                f"bag {self.path}, topic {topic}: transform {parent!r} -> "
+                                f"{child!r} at t = {stamp / 1e9:.3f} s: {error}; fix: correct "
+                                "the transforms published there"
+                            )
+                        ) from error
         return tree
 
-    def _poser(self, reader: AnyReader) -> Poser:
+    def _poser(self, bag: BagReader) -> Poser:
         """A function (stamp, image frame) -> camera-to-map pose; raises TransformLookupError."""
         source = self.pose_source
         tolerance = self.pose_tolerance_ns
         if isinstance(source, TfPose):
-            tree = self._tree(reader, required=True)
+            tree = self._tree(bag, required=True)
             for name in (source.map_frame, source.camera_frame):
                 if name is not None and name.lstrip("/") not in tree.frames():
                     raise IngestError(
@@ -313,21 +306,26 @@ class RosbagSource:
                 return tree.lookup(source.map_frame, camera, stamp, tolerance)
 
             return from_tf
-        connections = self._connections(reader, source.topic, ODOMETRY, "odometry")
+        connections = bag.connections_of(source.topic, ODOMETRY, "odometry")
         stamps: list[int] = []
         poses: list[Matrix] = []
         base_frames: set[str] = set()
-        for connection, _, raw in reader.messages(connections):
-            message: Any = reader.deserialize(raw, connection.msgtype)
+        for _, message in bag.messages(connections, source.topic):
             stamps.append(stamp_ns(message.header))
-            poses.append(pose_of(message.pose.pose))
+            try:
+                poses.append(pose_of(message.pose.pose))
+            except ValueError as error:  # a zero quaternion
+                raise IngestError(
+                    f"bag {self.path}, topic {source.topic} at t = {stamps[-1] / 1e9:.3f} s: "
+                    f"{error}; fix: correct the odometry published there"
+                ) from error
             base_frames.add(str(message.child_frame_id).lstrip("/"))
         if not stamps:
             raise IngestError(f"odometry topic {source.topic!r} has no messages")
         order = np.argsort(stamps, kind="stable")
         stamps = [stamps[i] for i in order]
         poses = [poses[i] for i in order]
-        static_tree = self._tree(reader, required=False) if source.camera_in_base is None else None
+        static_tree = self._tree(bag, required=False) if source.camera_in_base is None else None
         base = sorted(base_frames)[0]
 
         def from_odometry(stamp: int, image_frame: str) -> Matrix:
@@ -353,31 +351,29 @@ class RosbagSource:
 
         return from_odometry
 
-    def _index(
-        self, reader: AnyReader, topic: str
-    ) -> tuple[list[int], list[int], list[Connection]]:
+    def _index(self, bag: BagReader, topic: str) -> tuple[list[int], list[int], list[Connection]]:
         """(header stamps, bag times, connections) of an extra topic, sorted by header stamp."""
-        connections = [c for c in reader.connections if c.topic == topic]
+        connections = [c for c in bag.connections if c.topic == topic]
         if not connections:
-            topics = sorted({c.topic for c in reader.connections})
+            topics = sorted({c.topic for c in bag.connections})
             raise IngestError(
                 f"detector topic {topic!r} is not in bag {self.path}; its topics: "
                 f"{', '.join(topics)}"
             )
         pairs = []
-        for connection, bag_time, raw in reader.messages(connections):
-            message: Any = reader.deserialize(raw, connection.msgtype)
+        for bag_time, message in bag.messages(connections, topic):
             header = getattr(message, "header", None)
             pairs.append((stamp_ns(header) if header is not None else bag_time, bag_time))
         pairs.sort()
         return [stamp for stamp, _ in pairs], [bag for _, bag in pairs], connections
 
     def _fetch(
-        self, reader: AnyReader, connections: Sequence[Connection], bag_time: int, stamp: int
+        self, bag: BagReader, connections: Sequence[Connection], bag_time: int, stamp: int
     ) -> object:
         """The message of `connections` recorded at `bag_time` whose stamp is `stamp`."""
-        for connection, _, raw in reader.messages(connections, start=bag_time, stop=bag_time + 1):
-            message: Any = reader.deserialize(raw, connection.msgtype)
+        topic = connections[0].topic
+        window = {"start": bag_time, "stop": bag_time + 1}
+        for _, message in bag.messages(connections, topic, **window):
             header = getattr(message, "header", None)
             if header is None or stamp_ns(header) == stamp:
                 return message

@@ -11,6 +11,9 @@ from __future__ import annotations
 import functools
 import json
 import shutil
+import struct
+import zlib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -107,8 +110,8 @@ def write_label_map(path: Path) -> Path:
 
 
 def write_folder(kitchen: Path, out: Path, frames: int) -> Path:
-    """The first `frames` frames in the 7-Scenes layout (linked), and `out/masks` with one
-    instance PNG per frame."""
+    """The first `frames` frames in the 7-Scenes layout (copied: `pbdag ingest` refuses links
+    out of the folder), and `out/masks` with one instance PNG per frame."""
     out.mkdir(parents=True)
     masks = out / "masks"
     masks.mkdir()
@@ -116,7 +119,7 @@ def write_folder(kitchen: Path, out: Path, frames: int) -> Path:
     for index in range(frames):
         stem = f"frame-{index:06d}"
         for suffix in (".depth.png", ".pose.txt"):
-            (out / f"{stem}{suffix}").symlink_to(kitchen / f"{stem}{suffix}")
+            shutil.copy(kitchen / f"{stem}{suffix}", out / f"{stem}{suffix}")
         Image.fromarray(frame_instances(kitchen, index)).save(masks / f"{stem}.png")
     return out
 
@@ -157,7 +160,7 @@ def _transform(typestore: Any, ns: int, parent: str, child: str, matrix: Any) ->
     )
 
 
-def _camera_info(typestore: Any, ns: int) -> Any:
+def _camera_info(typestore: Any, ns: int, fx: float = FX) -> Any:
     types = typestore.types
     return types["sensor_msgs/msg/CameraInfo"](
         header=_header(typestore, ns, "camera_optical"),
@@ -165,9 +168,9 @@ def _camera_info(typestore: Any, ns: int) -> Any:
         width=WIDTH,
         distortion_model="plumb_bob",
         d=np.zeros(5),
-        k=np.array([FX, 0, CX, 0, FY, CY, 0, 0, 1], dtype=np.float64),
+        k=np.array([fx, 0, CX, 0, FY, CY, 0, 0, 1], dtype=np.float64),
         r=np.eye(3).reshape(-1),
-        p=np.array([FX, 0, CX, 0, 0, FY, CY, 0, 0, 0, 1, 0], dtype=np.float64),
+        p=np.array([fx, 0, CX, 0, 0, FY, CY, 0, 0, 0, 1, 0], dtype=np.float64),
         binning_x=0,
         binning_y=0,
         roi=types["sensor_msgs/msg/RegionOfInterest"](
@@ -196,6 +199,17 @@ def _odometry(typestore: Any, ns: int, matrix: Any) -> Any:
     )
 
 
+def _break(transform: Any, how: str | None) -> None:
+    """Break a geometry_msgs/Transform: "nan" (a NaN translation), "zero-quaternion"."""
+    if how == "nan":
+        transform.translation.x = float("nan")
+    elif how == "zero-quaternion":
+        rotation = transform.rotation
+        rotation.x = rotation.y = rotation.z = rotation.w = 0.0
+    elif how is not None:
+        raise ValueError(f"unknown way to break a transform: {how}")
+
+
 def frame_stamp(index: int) -> int:
     """The header stamp (ns) of frame `index` in the bag."""
     return T0_NS + index * PERIOD_NS
@@ -211,13 +225,19 @@ def write_bag(
     float_depth: bool = False,
     mcap: bool = False,
     camera_info_once: bool = False,
+    bad_tf: Mapping[int, str] | None = None,
+    garbage_depth: frozenset[int] = frozenset(),
+    fx: float = FX,
 ) -> Path:
     """A ROS 2 bag of the first `frames` frames: /camera/depth (16UC1 mm, or 32FC1 m),
     /camera/camera_info, /camera/instances (16UC1 ids), /tf, /tf_static and /odom.
 
     /tf and /odom are stamped 4 ms after each depth image (inside the pose tolerance); frames
     in `without_tf` have neither, frames in `without_labels` no label image. With
-    `camera_info_once` the camera info is published with the first frame only (latched)."""
+    `camera_info_once` the camera info is published with the first frame only (latched). The
+    /tf of a frame in `bad_tf` is broken as `_break` says, the depth message of a frame in
+    `garbage_depth` is bytes that no decoder reads; `fx` is the camera info's."""
+    bad_tf = bad_tf or {}
     typestore = get_typestore(Stores.ROS2_HUMBLE)
     odom_to_map = invert(MAP_TO_ODOM)
     camera_to_base = invert(BASE_TO_CAMERA)
@@ -247,15 +267,9 @@ def write_bag(
             depth, pose = load_frame(kitchen, index)
             odom_to_base = odom_to_map @ pose @ camera_to_base
             if index not in without_tf:
-                write(
-                    tf_topic,
-                    ns + 4_000_000,
-                    tf_message(
-                        transforms=[
-                            _transform(typestore, ns + 4_000_000, "odom", "base_link", odom_to_base)
-                        ]
-                    ),
-                )
+                odom_tf = _transform(typestore, ns + 4_000_000, "odom", "base_link", odom_to_base)
+                _break(odom_tf.transform, bad_tf.get(index))
+                write(tf_topic, ns + 4_000_000, tf_message(transforms=[odom_tf]))
                 write(
                     odom_topic, ns + 4_000_000, _odometry(typestore, ns + 4_000_000, odom_to_base)
                 )
@@ -266,9 +280,51 @@ def write_bag(
                 pixels[depth == 0] = np.nan
                 encoding = "32FC1"
             if index == 0 or not camera_info_once:
-                write(info_topic, ns, _camera_info(typestore, ns))
-            write(depth_topic, ns, _image(typestore, ns, pixels, encoding))
+                write(info_topic, ns, _camera_info(typestore, ns, fx))
+            if index in garbage_depth:  # bytes that are no CDR message
+                writer.write(depth_topic, ns, b"\x00\x01\x00\x00SECRET-TOKEN")
+            else:
+                write(depth_topic, ns, _image(typestore, ns, pixels, encoding))
             if index not in without_labels:  # recorded a moment after the depth, same stamp
                 ids = frame_instances(kitchen, index)
                 write(label_topic, ns + 1, _image(typestore, ns, ids, "16UC1"))
     return out
+
+
+def _chunk(kind: bytes, data: bytes) -> bytes:
+    """One PNG chunk: length, type, data, CRC of type and data."""
+    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+
+def _png_start(width: int, height: int, bit_depth: int) -> bytes:
+    """The PNG signature and the header of a greyscale image."""
+    header = struct.pack(">IIBBBBB", width, height, bit_depth, 0, 0, 0, 0)
+    return b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header)
+
+
+def write_zero_png(path: Path, width: int, height: int, bit_depth: int = 16) -> Path:
+    """A complete greyscale PNG of zeros, compressed row block by row block: a large one is a
+    decompression bomb (13000 x 13000 at 16 bits: 338 MB of pixels in a file of 329 KB) that is
+    never held in memory while written."""
+    row = bytes(1 + width * bit_depth // 8)  # the filter byte, then the pixels
+    compressor = zlib.compressobj()
+    with path.open("wb") as file:
+        file.write(_png_start(width, height, bit_depth))
+        for first in range(0, height, 256):
+            piece = compressor.compress(row * min(256, height - first))
+            if piece:
+                file.write(_chunk(b"IDAT", piece))
+        file.write(_chunk(b"IDAT", compressor.flush()))
+        file.write(_chunk(b"IEND", b""))
+    return path
+
+
+def write_png_header(
+    path: Path, width: int, height: int, data: bytes = b"", bit_depth: int = 16
+) -> Path:
+    """A PNG whose header says `width` x `height` and whose one IDAT chunk holds `data` (not
+    necessarily a zlib stream), every checksum valid."""
+    path.write_bytes(
+        _png_start(width, height, bit_depth) + _chunk(b"IDAT", data) + _chunk(b"IEND", b"")
+    )
+    return path

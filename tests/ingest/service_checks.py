@@ -39,3 +39,15 @@ def batch_status(url: str, scene: str, batch_id: str) -> dict[str, Any]:
     assert response.status_code == 200, response.text
     record: dict[str, Any] = response.json()
     return record
+
+
+def scene_names(url: str) -> set[str]:
+    """The names of every scene of the service."""
+    return {str(scene["name"]) for scene in httpx.get(f"{url}/v1/scenes").json()["scenes"]}
+
+
+def batch_exists(url: str, scene: str, batch_id: str) -> bool:
+    """Whether the scene holds a batch of this id."""
+    response = httpx.get(f"{url}/v1/scenes/{scene}/batches/{batch_id}")
+    assert response.status_code in (200, 404), response.text
+    return response.status_code == 200

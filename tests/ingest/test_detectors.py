@@ -31,6 +31,9 @@ class NoSource:
     def expected_frames(self) -> int | None:
         return None
 
+    def check(self, extra_topics: tuple[str, ...] = ()) -> None:
+        pass
+
     def frames(self, extra_topics: tuple[str, ...] = ()) -> Iterator[SourceFrame]:
         return iter(())
 
@@ -85,13 +88,21 @@ def test_label_maps_in_yaml_and_json(labels: Path, tmp_path: Path) -> None:
         ("1: {label: mug, colour: red}\n", r"unknown keys \['colour'\]"),
         ("- mug\n", "non-empty mapping"),
         ("1: [mug\n", "cannot be parsed"),
+        ("1: [SECRET\n", r"cannot be parsed \(line 2, column 1: expected ',' or ']', but got"),
+        (b"1: \xff\xfe", "is not UTF-8 text"),
     ],
 )
-def test_a_bad_label_map_says_what_is_wrong(tmp_path: Path, text: str, message: str) -> None:
+def test_a_bad_label_map_says_what_is_wrong(
+    tmp_path: Path, text: str | bytes, message: str
+) -> None:
     path = tmp_path / "labels.yaml"
-    path.write_text(text)
-    with pytest.raises(IngestError, match=message):
+    if isinstance(text, bytes):
+        path.write_bytes(text)
+    else:
+        path.write_text(text)
+    with pytest.raises(IngestError, match=message) as raised:
         load_label_map(path)
+    assert "\n" not in str(raised.value) and "SECRET" not in str(raised.value)
 
 
 def test_unknown_detectors_and_missing_options_are_named(labels: Path, tmp_path: Path) -> None:

@@ -13,7 +13,7 @@ from ingest.frames import IngestError
 from ingest.rosbag import OdomPose, RosbagSource, TfPose
 from ingest.transforms import invert
 from service.cli import main
-from tests.ingest.cli_runs import ingest_folder
+from tests.ingest.cli_runs import ingest_bag, ingest_folder
 from tests.ingest.conftest import FRAMES, Recordings
 from tests.ingest.recordings import BASE_TO_CAMERA, MAP_TO_ODOM, frame_stamp
 from tests.ingest.service_checks import batch_status, events, nodes, scene_id
@@ -36,25 +36,6 @@ def bag_source(bag: Path, pose: TfPose | OdomPose, stride: int = 1) -> RosbagSou
 
 def pose_file(kitchen: Path, index: int) -> np.ndarray:
     return np.loadtxt(kitchen / f"frame-{index:06d}.pose.txt")
-
-
-def ingest_bag(bag: Path, url: str, scene: str, *extra: str) -> int:
-    return main(
-        [
-            "ingest",
-            "rosbag",
-            str(bag),
-            "--scene",
-            scene,
-            "--url",
-            url,
-            "--depth-topic",
-            "/camera/depth",
-            "--camera-info-topic",
-            "/camera/camera_info",
-            *extra,
-        ]
-    )
 
 
 def test_tf_poses_compose_map_odom_base_camera_to_the_pose_files(
