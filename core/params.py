@@ -23,9 +23,22 @@ from core.params_shape import check_shape
 _CHECKED = ConfigDict(strict=True, extra="forbid", allow_inf_nan=False)
 
 
+def _refused(character: str) -> bool:
+    """A control, DEL, a lone surrogate or a non-character: what the service's text rule
+    refuses in every name and label, as XML and strict JSON consumers do."""
+    code = ord(character)
+    return (
+        code < 32
+        or code == 0x7F
+        or 0xD800 <= code <= 0xDFFF
+        or 0xFDD0 <= code <= 0xFDEF
+        or code & 0xFFFE == 0xFFFE
+    )
+
+
 def _printable(label: str) -> str:
-    if not label or len(label) > 100 or any(ord(c) < 32 or c == "\x7f" for c in label):
-        raise ValueError("labels are 1-100 printable characters")
+    if not label or len(label) > 100 or any(_refused(c) for c in label):
+        raise ValueError("labels are 1-100 printable characters (no control or non-character)")
     return label
 
 

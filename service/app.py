@@ -13,6 +13,8 @@ from service.bootstrap import Container, build_container
 from service.errors import install_problem_handlers
 from service.metrics import CONTENT_TYPE_LATEST
 from service.middleware.body_limit import BodySizeLimit
+from service.middleware.content_type_options import ContentTypeOptions
+from service.middleware.methods import Methods
 from service.middleware.request_log import RequestLog
 from service.middleware.unexpected import UnexpectedErrors
 from service.openapi import install_openapi
@@ -69,7 +71,9 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)
     install_security(app, container)
     install_openapi(app)  # hosts, CORS, tokens, rate limits: before the body limit
+    app.add_middleware(Methods, routes=app.router.routes)  # HEAD as GET; 405 with a full Allow
     app.add_middleware(UnexpectedErrors)  # a 500 keeps the connection
+    app.add_middleware(ContentTypeOptions)  # nosniff on every answer, a 500 included
     app.add_middleware(RequestLog)  # outermost: every answer logged, with its scene and batch
     routers = (scenes, batches, graph, events, tracks, verifications, baselines, inspections, plan)
     for module in routers:

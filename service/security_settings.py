@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -48,6 +49,13 @@ class SecuritySettings(BaseSettings):
         default_factory=list,
         description="Browser origins allowed to call the API (comma-separated); none by default.",
     )
+    trusted_proxies: Annotated[list[str], NoDecode] = Field(
+        default_factory=list,
+        description=(
+            "Reverse proxies (IP addresses or CIDR networks, comma-separated) whose "
+            "X-Forwarded-For names the client; none by default: the client is the socket's peer."
+        ),
+    )
     rate_limit_per_minute: int = Field(
         1200,
         ge=0,
@@ -61,7 +69,7 @@ class SecuritySettings(BaseSettings):
         description="Password put into PBDAG_DATABASE_URL when the URL has none (e.g. a Docker secret).",
     )
 
-    @field_validator("allowed_hosts", "cors_origins", mode="before")
+    @field_validator("allowed_hosts", "cors_origins", "trusted_proxies", mode="before")
     @classmethod
     def _comma_separated(cls, value: object) -> object:
         """Accept `a,b` (and a JSON list) from the environment."""
@@ -71,6 +79,22 @@ class SecuritySettings(BaseSettings):
                 return json.loads(text)
             return [item.strip() for item in text.split(",") if item.strip()]
         return value
+
+    @field_validator("trusted_proxies")
+    @classmethod
+    def _addresses_or_networks(cls, value: list[str]) -> list[str]:
+        """Each entry an IP address or a network (host bits allowed: `10.1.2.3/8` is
+        `10.0.0.0/8`), in canonical form; a name or `*` is an error, not a proxy trusted."""
+        canonical = []
+        for entry in value:
+            try:
+                if "/" in entry:
+                    canonical.append(str(ipaddress.ip_network(entry, strict=False)))
+                else:
+                    canonical.append(str(ipaddress.ip_address(entry)))
+            except ValueError:
+                raise ValueError(f"{entry!r} is not an IP address or a CIDR network") from None
+        return canonical
 
     @classmethod
     def settings_customise_sources(

@@ -129,3 +129,12 @@ def test_the_scene_list_pages_oldest_first(client: TestClient) -> None:
     missing = client.get("/v1/scenes", params={"after": "scn-nothere"})
     assert missing.status_code == 404 and missing.json()["field"] == "after"
     assert client.get("/v1/scenes", params={"limit": 1001}).status_code == 422
+
+
+def test_a_label_in_params_with_a_non_character_is_a_422(client: TestClient) -> None:
+    refused(
+        client,
+        {"fixtures": {"taxonomy": ["table", "desk\uffff"]}},
+        "params.fixtures.taxonomy[1]",
+        "no control or non-character",
+    )
