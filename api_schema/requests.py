@@ -6,6 +6,7 @@ from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
+    BeforeValidator,
     ConfigDict,
     Field,
     PlainValidator,
@@ -14,6 +15,9 @@ from pydantic import (
     field_validator,
 )
 from pydantic_core import PydanticCustomError
+
+from api_schema.text import PRINTABLE as PRINTABLE  # service.deps checks queries with it
+from api_schema.text import check_text
 
 # Strict numbers: the body is JSON, so "525" or true where a number belongs is a client bug,
 # not something to coerce silently. Every number is finite and inside a physical range; the
@@ -32,12 +36,14 @@ Timestamp = Annotated[float, Strict(), Field(ge=-1e11, le=1e11, allow_inf_nan=Fa
 EmbeddingValue = Annotated[float, Strict(), Field(ge=-1e6, le=1e6, allow_inf_nan=False)]
 # Open-vocabulary similarities: cosines or probabilities.
 Similarity = Annotated[float, Strict(), Field(ge=-1.0, le=1.0, allow_inf_nan=False)]
-# Printable text: no control characters (PostgreSQL cannot store NUL; logs must stay readable).
-PRINTABLE = r"^[^\x00-\x1f\x7f]*$"
-NonEmptyLabel = Annotated[str, Field(min_length=1, max_length=200, pattern=PRINTABLE)]
+# Text by the rule of api_schema.text: no control characters, DEL, lone surrogates or
+# non-characters. The check names the character; the pattern states the rule in the schema.
+NonEmptyLabel = Annotated[
+    str, Field(min_length=1, max_length=200, pattern=PRINTABLE), BeforeValidator(check_text)
+]
 Identifier = Annotated[str, Field(min_length=1, max_length=200, pattern=r"^[A-Za-z0-9._:-]+$")]
-# The databases store 64-bit signed integers.
-MAX_INT = 2**63 - 1
+# Integers a JSON number carries exactly (and the databases' 64-bit integers hold).
+MAX_INT = 2**53 - 1
 
 
 def _check_rle_counts(value: object) -> str | list[int]:
@@ -242,7 +248,9 @@ class VerdictIn(BaseModel):
 
 
 # A planar robot pose: within 10 km of the origin (as frame poses), yaw within ten radians.
-Coordinate = Annotated[float, Strict(), Field(ge=-10_000.0, le=10_000.0, allow_inf_nan=False)]
+# Metres: within the largest map a scene may have (occupancy.half_extent_m is at most 200); a
+# pose outside the scene's own map is a conflict with its parameters (409).
+Coordinate = Annotated[float, Strict(), Field(ge=-200.0, le=200.0, allow_inf_nan=False)]
 Yaw = Annotated[float, Strict(), Field(ge=-10.0, le=10.0, allow_inf_nan=False)]
 
 

@@ -26,7 +26,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from core.errors import InvalidCommand
+from core.errors import StateConflict
 from core.events import Event, InspectionTargeted
 from core.navigation import Frontier, Navigation
 from core.occupancy import MapGeometry
@@ -148,9 +148,9 @@ def plan(state: SceneState, robot: ViewPose) -> Plan:
     params = state.params
     geometry = MapGeometry.of(params.occupancy)
     if max(abs(robot.x), abs(robot.y)) >= geometry.side // 2 * geometry.resolution_m:
-        raise InvalidCommand(
-            f"robot_pose ({robot.x:.2f}, {robot.y:.2f}) is outside the map "
-            f"(|x|, |y| < {params.occupancy.half_extent_m} m)",
+        raise StateConflict(  # a pose the API admits, outside this scene's own map
+            f"robot_pose ({robot.x:.2f}, {robot.y:.2f}) is outside the scene's map "
+            f"(|x|, |y| < {params.occupancy.half_extent_m} m: occupancy.half_extent_m)",
             "robot_pose",
         )
     unresolved = unresolved_fixtures(state)

@@ -11,11 +11,17 @@ import textwrap
 import threading
 from importlib.metadata import entry_points
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+from pbdag_errors import PbdagError
 from service.admin_cli import register as register_admin_commands
 from service.auth_cli import register as register_token_commands
 from service.logs import configure_logging
 from service.settings import Settings, SettingsError
+
+if TYPE_CHECKING:
+    from service.bootstrap import Container
+    from service.worker import Worker
 
 OPENAPI_PATH = Path(__file__).resolve().parents[1] / "api_schema" / "openapi.json"
 
@@ -181,7 +187,17 @@ def _serve(args: argparse.Namespace) -> int:
     print(access_summary(container.engine, settings.allow_anonymous_local), flush=True)
     app = create_app(container, run_worker=settings.run_worker)
     # log_config=None: uvicorn's records go through the handler configured above (text or JSON).
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning", log_config=None)
+    # X-Forwarded-For names the client only when a trusted proxy sent it (uvicorn's own default
+    # trusts it from loopback); with no proxy listed, uvicorn does not read it at all.
+    uvicorn.run(
+        app,
+        host=settings.host,
+        port=settings.port,
+        log_level="warning",
+        log_config=None,
+        proxy_headers=bool(settings.trusted_proxies),
+        forwarded_allow_ips=settings.trusted_proxies,
+    )
     return 0
 
 
@@ -202,15 +218,40 @@ def _worker(args: argparse.Namespace) -> int:
     if args.drain:
         try:
             processed = worker.drain()
+        except PbdagError as error:  # the queue itself failed (a lost or unwritable database)
+            print(f"pbdag worker: the queue failed: {error.detail}", file=sys.stderr)
+            return 1
         finally:
             container.engine.dispose()
         print(f"pbdag worker {worker.name}: processed {processed} batches")
-        return 0
+        return _left_undone(container, worker)
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
     worker.run(stop)
     return 0
+
+
+UNDONE = ("queued", "failed", "running")  # failed: waiting for its retry
+
+
+def _left_undone(container: Container, worker: Worker) -> int:
+    """0 when the queue holds no batch still to be done, else 1 naming what is left and why."""
+    try:
+        counts = container.queue.counts()
+    except PbdagError as error:
+        print(f"pbdag worker: cannot read the queue: {error.detail}", file=sys.stderr)
+        return 1
+    left = {status: counts.get(status, 0) for status in UNDONE if counts.get(status, 0)}
+    if not left and not worker.unrecorded:
+        return 0
+    listed = ", ".join(f"{count} {status}" for status, count in left.items()) or "none queued"
+    print(f"pbdag worker: work left undone ({listed})", file=sys.stderr, end="")
+    if worker.unrecorded:
+        print(f"; {worker.unrecorded} failures not recorded", file=sys.stderr, end="")
+    reason = worker.health.problem or "batches waiting for a retry or held by another worker"
+    print(f": {reason}", file=sys.stderr)
+    return 1
 
 
 def _migrate(_args: argparse.Namespace) -> int:

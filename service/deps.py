@@ -15,7 +15,7 @@ from service.store.event_log import SceneRecord
 from service.store.queue_records import Admission
 
 # Largest integer a query or path may carry: the databases store 64-bit signed integers.
-MAX_INT = 2**63 - 1
+MAX_INT = 2**53 - 1  # integers a JSON number carries exactly
 
 
 def get_container(request: Request) -> Container:

@@ -29,6 +29,7 @@ COMMON = {
     422: "A field is invalid: `field` names it.",
     429: "Too many requests (rate limit, or the scene's queue is full): see Retry-After.",
     500: "The server failed; nothing was changed.",
+    503: "The database or the blob store is unavailable for a moment: retry after Retry-After.",
 }
 SCENE = {
     404: "The scene, or what the path names in it, does not exist (or `as_of` is past the head).",
@@ -37,7 +38,8 @@ SCENE = {
 BODY = {413: "The request body is over the limit (PBDAG_MAX_BODY_BYTES)."}
 STORAGE = {507: "The scene's raw batches would exceed its quota (PBDAG_MAX_SCENE_BLOB_BYTES)."}
 GONE = {410: "The batch's raw body was deleted by `pbdag gc` (PBDAG_RAW_RETENTION)."}
-OPEN = {400: COMMON[400], 500: COMMON[500]}
+OPEN = {400: COMMON[400], 500: COMMON[500], 503: COMMON[503]}
+LISTING = {404: "`after` names no scene."}
 
 
 def error_statuses(path: str, method: str) -> dict[int, str]:
@@ -53,6 +55,8 @@ def error_statuses(path: str, method: str) -> dict[int, str]:
         statuses |= STORAGE
     if path.endswith("/requeue"):
         statuses |= GONE
+    if path == "/v1/scenes" and method == "get":
+        statuses |= LISTING
     return statuses
 
 

@@ -82,8 +82,8 @@ def post_plan(scene: SceneDep, body: PlanIn, container: ContainerDep) -> PlanOut
 def preview_plan(
     scene: SceneDep,
     states: StatesDep,
-    x: Annotated[float, Query(ge=-10_000, le=10_000, allow_inf_nan=False, description="Metres.")],
-    y: Annotated[float, Query(ge=-10_000, le=10_000, allow_inf_nan=False, description="Metres.")],
+    x: Annotated[float, Query(ge=-200, le=200, allow_inf_nan=False, description="Metres.")],
+    y: Annotated[float, Query(ge=-200, le=200, allow_inf_nan=False, description="Metres.")],
     yaw: Annotated[float, Query(ge=-10, le=10, allow_inf_nan=False, description="Radians.")] = 0.0,
     as_of: AsOf = None,
 ) -> PlanOut:

@@ -10,7 +10,7 @@ from typing import Unpack
 import numpy as np
 import pytest
 
-from core.errors import InvalidCommand
+from core.errors import StateConflict
 from core.events import InspectionRecorded, InspectionTargeted
 from core.evolve import fold
 from core.inspection import decide_inspection
@@ -408,7 +408,7 @@ def test_with_nothing_to_inspect_the_plan_explores_then_is_done() -> None:
 
 
 def test_a_robot_outside_the_map_is_refused_naming_the_field() -> None:
-    with pytest.raises(InvalidCommand) as error:
+    with pytest.raises(StateConflict) as error:
         plan(scene(grid_of(room(4.0, 3.0))), ViewPose(x=150.0, y=0.0, yaw=0.0))
     assert error.value.field == "robot_pose"
 

@@ -184,7 +184,7 @@ BAD_PLANS = [
     ({"robot_pose": {"x": 1.0, "y": 1.0, "yaw": 99.0}}, "robot_pose.yaw"),
     ({"robot_pose": {**ROBOT, "z": 1.0}}, "robot_pose.z"),
     ({"robot_pose": ROBOT, "as_of": 3}, "as_of"),
-    ({"robot_pose": {"x": 500.0, "y": 1.0, "yaw": 0.0}}, "robot_pose"),  # outside the map
+    ({"robot_pose": {"x": 500.0, "y": 1.0, "yaw": 0.0}}, "robot_pose.x"),  # beyond any map
 ]
 
 
@@ -211,4 +211,10 @@ def test_bad_plan_input_is_a_422_naming_the_field_and_appends_nothing(api: Api, 
         response = client.get(f"/v1/scenes/{house}/plan", params=params)
         assert response.status_code == 422 and response.json()["field"] == field
     assert client.post("/v1/scenes/scn-none/plan", json={"robot_pose": ROBOT}).status_code == 404
+    # A pose any map could hold, outside this scene's (100 m): a conflict with its parameters.
+    outside = client.post(
+        f"/v1/scenes/{house}/plan", json={"robot_pose": {"x": 150.0, "y": 1.0, "yaw": 0.0}}
+    )
+    assert outside.status_code == 409 and outside.json()["field"] == "robot_pose"
+    assert "occupancy.half_extent_m" in outside.json()["detail"]
     assert head(client, house) == before

@@ -16,6 +16,7 @@ from service.bootstrap import Container
 from service.commands import create_scene
 from service.settings import Settings
 from service.store import projection
+from service.store.engine import write_transaction
 from service.store.projection import rebuild_scene
 from service.store.tables import tracks
 from tests.service.minimal_events import added, append_batch, missed
@@ -39,7 +40,7 @@ def test_a_batch_appended_between_the_replay_and_the_write_is_in_the_projections
     scene = create_scene(container, "live", Params())
     append_batch(container, scene.id, [added("trk-000001"), added("trk-000002", 2.0)])
     append_batch(container, scene.id, [missed("trk-000001", 0.3, 1)])
-    original = projection.write_transaction
+    original = write_transaction
 
     @contextmanager
     def after_a_worker_appended(engine: sa.Engine) -> Iterator[sa.Connection]:
