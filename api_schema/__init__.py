@@ -51,6 +51,7 @@ from api_schema.responses import (
     VerificationList,
     ViewOut,
     VisibleMiss,
+    WorkerStatus,
 )
 
 __all__ = [
@@ -102,4 +103,5 @@ __all__ = [
     "VerificationList",
     "ViewOut",
     "VisibleMiss",
+    "WorkerStatus",
 ]

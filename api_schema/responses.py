@@ -198,12 +198,25 @@ class Explanation(BaseModel):
     removal: Removal | None
 
 
+class WorkerStatus(BaseModel):
+    """The in-process worker's health: whether it can record what it does."""
+
+    healthy: bool
+    problem: str | None = Field(description="Why not (a full disk, a lost database).")
+    since: float | None = Field(description="Unix time it became unhealthy.")
+
+
 class Health(BaseModel):
     """Liveness and the queue at a glance."""
 
-    status: Literal["ok"]
+    status: Literal["ok", "degraded"] = Field(
+        description="`degraded` while the in-process worker cannot record what it does."
+    )
     database: str
     batches: dict[str, int]
+    worker: WorkerStatus | None = Field(
+        None, description="The in-process worker (`pbdag serve`); null when workers run apart."
+    )
 
 
 class VerificationItem(BaseModel):

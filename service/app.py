@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI
 from starlette.responses import PlainTextResponse
 
-from api_schema import Health
+from api_schema import Health, WorkerStatus
 from service.bootstrap import Container, build_container
 from service.errors import install_problem_handlers
 from service.metrics import CONTENT_TYPE_LATEST
@@ -44,6 +45,7 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
         worker = WorkerThread(container) if run_worker else None
+        app.state.worker = worker
         if worker is not None:
             worker.start()
         try:
@@ -81,9 +83,15 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
 
     @app.get("/healthz", response_model=Health, tags=["health"])
     def healthz() -> Health:
-        """Liveness, the database backend, and batches per status."""
+        """Liveness, the database backend, batches per status, and the in-process worker's
+        health (`degraded` while it cannot record what it does)."""
+        thread: WorkerThread | None = getattr(app.state, "worker", None)
+        health = None if thread is None else thread.worker.health
         return Health(
-            status="ok", database=container.engine.dialect.name, batches=container.queue.counts()
+            status="ok" if health is None or health.healthy else "degraded",
+            database=container.engine.dialect.name,
+            batches=container.queue.counts(),
+            worker=None if health is None else WorkerStatus(**dataclasses.asdict(health)),
         )
 
     @app.get(

@@ -15,7 +15,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 
-from prometheus_client import CollectorRegistry, Counter, Histogram
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 from prometheus_client.core import GaugeMetricFamily, Metric
 from prometheus_client.exposition import CONTENT_TYPE_LATEST, generate_latest
 from prometheus_client.registry import Collector
@@ -97,6 +97,13 @@ class Metrics:
             "Batches this process parked as dead (never decodable, or out of attempts).",
             registry=self.registry,
         )
+        self.worker_healthy = Gauge(
+            "pbdag_worker_healthy",
+            "1 while this process's worker can record what it does; 0 when it cannot (a full "
+            "disk, a read-only or lost database): it then claims nothing.",
+            registry=self.registry,
+        )
+        self.worker_healthy.set(1)
 
     @contextmanager
     def timed(self, histogram: Histogram) -> Iterator[None]:

@@ -98,9 +98,16 @@ class Worker:
         self._unrecorded: dict[int, tuple[Claim, str, bool]] = {}  # by batch row id
         self.health = WorkerHealth()
 
+    def _healthy(self) -> None:
+        if not self.health.healthy:
+            logger.info("worker %s can record again (was: %s)", self.name, self.health.problem)
+        self.health = WorkerHealth()
+        self.container.metrics.worker_healthy.set(1)
+
     def _unhealthy(self, problem: str) -> None:
         if self.health.healthy or self.health.problem != problem:
             self.health = WorkerHealth(False, problem, self.health.since or time.time())
+            self.container.metrics.worker_healthy.set(0)
 
     def run_once(self) -> bool:
         """Record the failures not yet recorded, settle expired leases, then process one batch;
@@ -167,7 +174,7 @@ class Worker:
             self._failed(claim, error)
             return
         metrics.batches_processed.labels("done").inc()
-        self.health = WorkerHealth()
+        self._healthy()
         logger.info(
             "batch %s of scene %s done: %d events%s",
             claim.batch_id,
@@ -236,7 +243,7 @@ class Worker:
 
     def _recovered(self, problem: str) -> None:
         if (self.health.problem or "").startswith(problem):
-            self.health = WorkerHealth()
+            self._healthy()
 
     @property
     def unrecorded(self) -> int:

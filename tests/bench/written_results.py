@@ -273,7 +273,7 @@ def write_blobs(mp: pytest.MonkeyPatch) -> None:
 def write_memory(mp: pytest.MonkeyPatch) -> None:
     from bench import bench_memory
 
-    def run_case(name: str, make: Any, root: Path) -> MemoryCase:
+    def run_case(name: str, make: Any, root: Path, params: Any = None) -> MemoryCase:
         worker = 287.0 if name == "most fixture masks over noise depth" else 150.0
         return MemoryCase(
             body_mb=24.0,

@@ -99,3 +99,35 @@ def test_drain_exits_non_zero_when_the_disk_is_full_and_zero_once_it_is_not(
     done = subprocess.run(drain, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-2000:]
     assert build_container(settings).queue.counts(scene_id) == {"done": 3}
+
+
+def test_healthz_shows_the_in_process_worker_degraded_while_it_cannot_write(
+    container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def cannot_write(*_args: object, **_kwargs: object) -> None:
+        raise DISK_FULL
+
+    def health_when(client: TestClient, wanted: str) -> dict[str, object]:
+        for _ in range(200):
+            health: dict[str, object] = client.get("/healthz").json()
+            if health["status"] == wanted:
+                return health
+            time.sleep(0.05)
+        raise AssertionError(f"/healthz never said {wanted}: {health}")
+
+    with local_client(create_app(container, run_worker=True)) as client:
+        assert client.get("/healthz").json()["worker"]["healthy"] is True
+        scene_id = client.post("/v1/scenes", json={"name": "full disk"}).json()["id"]
+        with monkeypatch.context() as broken:
+            broken.setattr(container.uow, "begin", cannot_write)  # the append and its record
+            broken.setattr(container.queue, "retry_later", cannot_write)
+            posted = client.post(f"/v1/scenes/{scene_id}/batches", json=batch("b0", 0))
+            assert posted.status_code == 202
+            degraded = health_when(client, "degraded")
+            worker = degraded["worker"]
+            assert isinstance(worker, dict) and worker["healthy"] is False
+            assert "No space left on device" in str(worker["problem"])
+        ok = health_when(client, "ok")
+        assert ok["worker"] == {"healthy": True, "problem": None, "since": None}
+        metrics = client.get("/metrics").text
+        assert "pbdag_worker_healthy 1.0" in metrics
