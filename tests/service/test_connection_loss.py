@@ -18,6 +18,7 @@ from service.store.engine import make_engine
 from service.worker import Worker
 from tests.clients import local_client
 from tests.conftest import POSTGRES_URL, store_backends
+from tests.service.invariants import blobs_agree_with_rows, projections_equal_a_replay
 from tests.wire_scenes import batch
 
 pytestmark = [
@@ -89,6 +90,8 @@ def test_terminated_connections_answer_503_with_retry_after_and_lose_nothing(
         ]
         logged = [event.seq for event in container.log.read(scene_id) if event.batch_id]
         assert seqs == logged, "an event lost, duplicated or outside its batch"
+        assert len(blobs_agree_with_rows(container, scene_id)) == ROUNDS
+        projections_equal_a_replay(container, scene_id)
     finally:
         stop.set()
         engine.dispose()

@@ -17,6 +17,7 @@ from service.retention import ORPHAN_GRACE_SECONDS, collect
 from service.store.blobs import BlobNotFound, FileBlobStore
 from service.worker import Worker
 from tests.clients import local_client
+from tests.service.invariants import blobs_agree_with_rows, projections_equal_a_replay
 from tests.wire_scenes import batch
 
 
@@ -37,17 +38,6 @@ def posted_and_done(client: TestClient, container: Container, count: int) -> str
         assert client.post(f"/v1/scenes/{scene_id}/batches", json=body).status_code == 202
     assert Worker(container).drain() == count
     return scene_id
-
-
-def consistent(container: Container, scene_id: str) -> set[str]:
-    """Every row not collected has its blob; every blob is held by a row not collected.
-    Returns the blob keys."""
-    keys = set(container.blobs.keys())
-    records = container.queue.of_scene(scene_id)
-    held = {r.blob_key for r in records if r.blob_collected_at is None}
-    assert held <= keys, "a row a worker may claim points at a missing blob"
-    assert keys <= held, f"{len(keys - held)} blobs without a row that holds them"
-    return keys
 
 
 def test_gc_killed_between_marking_and_deleting_is_finished_by_the_next(
@@ -73,8 +63,9 @@ def test_gc_killed_between_marking_and_deleting_is_finished_by_the_next(
 
     report = collect(container, 0.0, clock=lambda: time.time() + 10)
     assert report.batches == 0 and report.swept_collected == 2 and report.swept_unnamed == 0
-    assert consistent(container, scene_id) == set()
+    assert blobs_agree_with_rows(container, scene_id) == set()
     assert collect(container, 0.0).swept_collected == 0  # nothing left
+    projections_equal_a_replay(container, scene_id)
 
 
 def test_gc_killed_before_marking_leaves_everything_for_the_next(
@@ -89,9 +80,9 @@ def test_gc_killed_before_marking_leaves_everything_for_the_next(
     with pytest.raises(Killed):
         collect(container, 0.0, clock=lambda: time.time() + 10)
     monkeypatch.undo()
-    assert len(consistent(container, scene_id)) == 2  # nothing marked, nothing deleted
+    assert len(blobs_agree_with_rows(container, scene_id)) == 2  # nothing marked, nothing deleted
     assert collect(container, 0.0, clock=lambda: time.time() + 10).blobs_deleted == 2
-    assert consistent(container, scene_id) == set()
+    assert blobs_agree_with_rows(container, scene_id) == set()
 
 
 def test_a_blob_no_row_names_is_swept_once_past_the_grace(
@@ -109,7 +100,9 @@ def test_a_blob_no_row_names_is_swept_once_past_the_grace(
     assert report.swept_unnamed == 1
     with pytest.raises(BlobNotFound):
         container.blobs.get(orphan)
-    assert len(consistent(container, scene_id)) == 2  # the done and the queued batch's blobs
+    assert (
+        len(blobs_agree_with_rows(container, scene_id)) == 2
+    )  # the done and the queued batch's blobs
     assert Worker(container).drain() == 1  # the queued batch still has its body
 
 

@@ -83,3 +83,5 @@ def test_rebuilds_during_a_stream_of_appends_report_identical_and_lose_nothing(
     assert all(report.identical for report in reports), [r for r in reports if not r.identical]
     assert reports[-1].events == appended + 1
     assert track_ids(container, scene.id) == [f"trk-{k:06d}" for k in range(appended)]
+    logged = [event.seq for event in container.log.read(scene.id)]
+    assert logged == list(range(appended + 1)), "an event lost or duplicated"

@@ -22,6 +22,7 @@ from service.settings import Settings
 from service.store.errors import StoreUnavailable
 from service.worker import Worker
 from tests.clients import local_client
+from tests.service.invariants import blobs_agree_with_rows, projections_equal_a_replay
 from tests.wire_scenes import batch
 
 DISK_FULL = StoreUnavailable("writing", OSError(28, "No space left on device"))
@@ -68,6 +69,8 @@ def test_a_failure_that_cannot_be_recorded_is_recorded_once_writing_works(
         connection.execute(sa.text("UPDATE batches SET not_before = 0"))
     assert worker.drain() == 2
     assert container.queue.counts(scene_id) == {"done": 2}
+    assert len(blobs_agree_with_rows(container, scene_id)) == 2
+    projections_equal_a_replay(container, scene_id)
 
 
 def test_drain_exits_non_zero_when_the_disk_is_full_and_zero_once_it_is_not(
