@@ -218,13 +218,13 @@ def _worker(args: argparse.Namespace) -> int:
     if args.drain:
         try:
             processed = worker.drain()
+            print(f"pbdag worker {worker.name}: processed {processed} batches")
+            return _left_undone(container, worker)
         except PbdagError as error:  # the queue itself failed (a lost or unwritable database)
             print(f"pbdag worker: the queue failed: {error.detail}", file=sys.stderr)
             return 1
         finally:
             container.engine.dispose()
-        print(f"pbdag worker {worker.name}: processed {processed} batches")
-        return _left_undone(container, worker)
     stop = threading.Event()
     for signum in (signal.SIGINT, signal.SIGTERM):
         signal.signal(signum, lambda *_: stop.set())
