@@ -6,9 +6,13 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
 
 import numpy as np
 
+import core.decide as decide_module
 from bench.perf_common import write_results
 from bench.records import LIVE_ONLY, DecideCondition, DecideResult
 from core.decide import decide
@@ -146,6 +150,55 @@ def timed(state: SceneState, batch: Batch) -> tuple[float, float, int]:
     return 1000 * (decided - started), 1000 * (done - decided), len(events)
 
 
+# decide's stages in its order (core/decide.py): where a frame's time goes.
+STAGES = (
+    "fixture_batch",
+    "ground_frames",
+    "batch_visibility",
+    "associate_batch",
+    "support_parents",
+    "existence_updates",
+    "lifecycle_decisions",
+    "occupancy_evidence",
+    "batch_events",
+)
+
+
+@contextmanager
+def stage_clock(spent: dict[str, list[float]]) -> Iterator[None]:
+    """Time every stage `decide` calls while inside (ms per call, appended to `spent`)."""
+    originals: dict[str, Callable[..., Any]] = {
+        name: getattr(decide_module, name) for name in STAGES
+    }
+
+    def clocked(name: str, stage: Callable[..., Any]) -> Callable[..., Any]:
+        def run(*args: Any, **kwargs: Any) -> Any:
+            started = time.perf_counter()
+            try:
+                return stage(*args, **kwargs)
+            finally:
+                spent[name].append(1000 * (time.perf_counter() - started))
+
+        return run
+
+    for name, stage in originals.items():
+        setattr(decide_module, name, clocked(name, stage))
+    try:
+        yield
+    finally:
+        for name, stage in originals.items():
+            setattr(decide_module, name, stage)
+
+
+def stage_breakdown(state: SceneState, batch: Batch, repeats: int) -> dict[str, float]:
+    """Median ms of each stage of `decide` on this batch, over `repeats` runs."""
+    spent: dict[str, list[float]] = {name: [] for name in STAGES}
+    with stage_clock(spent):
+        for _ in range(repeats):
+            decide(state, batch)
+    return {name: statistics.median(times) for name, times in spent.items() if times}
+
+
 def main(argv: list[str] | None = None) -> None:
     """Median decide + evolve of one frame, with and without 5,000 retired or stale hypotheses
     in memory (measured interleaved); writes bench/results/decide.json."""
@@ -191,6 +244,12 @@ def main(argv: list[str] | None = None) -> None:
             f"(p90 {statistics.quantiles(total, n=10)[-1]:6.2f}), {median / base:4.2f}x; "
             f"goal < 10 ms, and <= 1.5x with the hypotheses"
         )
+    stages = stage_breakdown(state, batch, min(args.repeats, 50))
+    print(
+        f"{'per stage (500 live tracks)':>32}: "
+        + ", ".join(f"{name} {ms:.2f}" for name, ms in stages.items())
+        + f" ms (sum {sum(stages.values()):.2f})"
+    )
     results = DecideResult(
         masks=len(frame.detections),
         resolution=(frame.intrinsics.width, frame.intrinsics.height),
@@ -198,6 +257,7 @@ def main(argv: list[str] | None = None) -> None:
         goal_ms=10.0,
         goal_ratio_with_hypotheses=1.5,
         conditions=conditions,
+        stages_median_ms=stages,
     )
     write_results("decide", results)
 

@@ -73,6 +73,8 @@ class DecideResult:
     goal_ms: float
     goal_ratio_with_hypotheses: float
     conditions: dict[str, DecideCondition]  # LIVE_ONLY and the conditions with hypotheses
+    # decide's stages on the LIVE_ONLY batch (bench_decide.STAGES), median ms each.
+    stages_median_ms: dict[str, float] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

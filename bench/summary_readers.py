@@ -152,6 +152,14 @@ def read_decide(data: DecideResult) -> list[Figure]:
                 value=worst,
             )
         )
+    if data.stages_median_ms:
+        ranked = sorted(data.stages_median_ms.items(), key=lambda item: -item[1])
+        figures.append(
+            Figure(
+                "decide per stage, 500 live tracks (the largest first)",
+                ", ".join(f"{name} {number(ms)} ms" for name, ms in ranked),
+            )
+        )
     return figures
 
 

@@ -58,6 +58,8 @@ def write_decide(mp: pytest.MonkeyPatch) -> None:
     mp.setattr(bench_decide, "state_with_500_tracks", lambda frame, seed: live)
     mp.setattr(bench_decide, "with_hypotheses", with_hypotheses)
     mp.setattr(bench_decide, "timed", lambda state, batch: (*cost[state.kind], 25))
+    stages = {"fixture_batch": 2.0, "associate_batch": 4.0, "occupancy_evidence": 6.0}
+    mp.setattr(bench_decide, "stage_breakdown", lambda state, batch, repeats: stages)
     bench_decide.main(["--repeats", "3"])
 
 
