@@ -4,6 +4,9 @@ row a worker may claim ever points at a deleted blob (on every store backend).""
 from __future__ import annotations
 
 import os
+import signal
+import subprocess
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -83,6 +86,34 @@ def test_gc_killed_before_marking_leaves_everything_for_the_next(
     assert len(blobs_agree_with_rows(container, scene_id)) == 2  # nothing marked, nothing deleted
     assert collect(container, 0.0, clock=lambda: time.time() + 10).blobs_deleted == 2
     assert blobs_agree_with_rows(container, scene_id) == set()
+
+
+def store_environment(container: Container, request: pytest.FixtureRequest) -> dict[str, str]:
+    """The environment a `pbdag` process needs to open this test's store."""
+    env = {**os.environ, "PBDAG_DATA_DIR": str(container.settings.data_dir)}
+    if container.engine.dialect.name == "sqlite":
+        env["PBDAG_DATABASE_URL"] = str(container.engine.url)
+    else:
+        url, schema = request.getfixturevalue("postgres_schema_url")
+        env["PBDAG_DATABASE_URL"] = f"{url}?options=-csearch_path%3D{schema}"
+    return env
+
+
+@pytest.mark.parametrize("step", ["marking", "deleting", "deleted-one"])
+def test_gc_sigkilled_at_each_step_leaves_what_the_next_gc_finishes(
+    client: TestClient, container: Container, request: pytest.FixtureRequest, step: str
+) -> None:
+    scene_id = posted_and_done(client, container, 3)
+    killer = [sys.executable, "-m", "tests.service.gc_killer", step]
+    env = store_environment(container, request)
+    died = subprocess.run(killer, env=env, capture_output=True, text=True, timeout=120)
+    assert died.returncode == -signal.SIGKILL, died.stderr[-2000:]
+    left = len(set(container.blobs.keys()))
+    assert left == {"marking": 3, "deleting": 3, "deleted-one": 2}[step]
+    report = collect(container, 0.0, clock=lambda: time.time() + 10)
+    assert report.blobs_deleted + report.swept_collected == left
+    assert blobs_agree_with_rows(container, scene_id) == set()
+    projections_equal_a_replay(container, scene_id)
 
 
 def test_a_blob_no_row_names_is_swept_once_past_the_grace(
