@@ -44,6 +44,7 @@ bench: setup  ## the performance benchmarks (figures printed and written to benc
 	$(BIN)/python -m bench.bench_render
 	$(BIN)/python -m bench.bench_decide
 	$(BIN)/python -m bench.bench_fixture_step
+	$(BIN)/python -m bench.bench_stream
 	$(BIN)/python -m bench.bench_plan
 	$(BIN)/python -m bench.bench_rollout
 	$(BIN)/python -m bench.bench_store append --postgres postgresql+psycopg://postgres@127.0.0.1:5432/test

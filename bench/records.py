@@ -78,6 +78,23 @@ class DecideResult:
 
 
 @dataclass(frozen=True)
+class StreamCondition:
+    tracks: int  # at the end of the stream
+    median_ms: float  # decide + fold per frame
+    p90_ms: float
+
+
+@dataclass(frozen=True)
+class StreamResult:
+    scenario: str
+    seed: int
+    frames: int
+    goal_ms: float
+    conditions: dict[str, StreamCondition]  # the stream's own tracks, and with extra tracks
+    stages_median_ms_per_frame: dict[str, float]
+
+
+@dataclass(frozen=True)
 class Timings:
     median_ms: float
     p90_ms: float

@@ -40,6 +40,7 @@ from bench.summary_readers import (
     read_render,
     read_rollout,
     read_service,
+    read_stream,
     read_versus,
 )
 
@@ -140,6 +141,14 @@ BENCHES: tuple[Bench[Any], ...] = (
         read_fixture_step,
         ("fixture_step",),
         notes="../bench/README.md#the-fixture-step",
+    ),
+    Bench(
+        "stream",
+        "python -m bench.bench_stream",
+        "stream.json",
+        records.StreamResult,
+        read_stream,
+        ("stream",),
     ),
     Bench(
         "plan",

@@ -20,6 +20,7 @@ from bench.records import (
     RenderResult,
     RolloutBenchResult,
     ServiceResult,
+    StreamResult,
     VersusResult,
 )
 
@@ -62,6 +63,7 @@ GOALS: dict[str, Goal] = {
     "render": Goal(">= 30 frames/s", ">=", 30.0, " frames/s"),
     "decide": Goal("< 10 ms", "<", 10.0, " ms"),
     "decide_hypotheses": Goal("<= 1.5x the live tracks alone", "<=", 1.5, "x"),
+    "stream": Goal("median <= 10 ms a frame, 500 more tracks in play", "<=", 10.0, " ms"),
     "fixture_step": Goal("median <= 10 ms per batch at 100k voxels", "<=", 10.0, " ms"),
     "plan": Goal("median < 50 ms per decision", "<", 50.0, " ms"),
     "rollout": Goal("< 5 min", "<", 300.0, " s"),
@@ -161,6 +163,26 @@ def read_decide(data: DecideResult) -> list[Figure]:
             )
         )
     return figures
+
+
+def read_stream(data: StreamResult) -> list[Figure]:
+    own, *more = data.conditions.values()
+    loaded = more[-1] if more else own
+    ranked = sorted(data.stages_median_ms_per_frame.items(), key=lambda item: -item[1])
+    return [
+        Figure(
+            f"decide + fold per frame, {data.scenario} stream ({data.frames} frames)",
+            f"median {number(loaded.median_ms)} ms, p90 {number(loaded.p90_ms)} ms with "
+            f"{loaded.tracks} tracks in play",
+            peer=f"its own {own.tracks} tracks: median {number(own.median_ms)} ms",
+            goal="stream",
+            value=loaded.median_ms,
+        ),
+        Figure(
+            f"decide per stage per frame, {data.scenario} stream (the largest first)",
+            ", ".join(f"{name} {number(ms)} ms" for name, ms in ranked),
+        ),
+    ]
 
 
 def read_fixture_step(data: FixtureStepResult) -> list[Figure]:

@@ -343,9 +343,33 @@ def write_service(mp: pytest.MonkeyPatch, argv: list[str] | None = None) -> None
     )
 
 
+def write_stream(mp: pytest.MonkeyPatch) -> None:
+    from bench import bench_stream
+
+    frame = SimpleNamespace()
+    mp.setattr(
+        bench_stream,
+        "hotel_batches",
+        lambda frames, seed: [SimpleNamespace(frames=(frame, frame))] * 4,
+    )
+    mp.setattr(
+        bench_stream,
+        "with_extra_tracks",
+        lambda state, count, seed: SimpleNamespace(tracks=dict.fromkeys(range(count)), extra=True),
+    )
+    mp.setattr(bench_stream, "SceneState", lambda: SimpleNamespace(tracks={}, extra=False))
+
+    def step(state: Any, batch: Any) -> tuple[Any, float]:
+        return state, 12.5 if state.extra else 8.0  # ms a frame
+
+    mp.setattr(bench_stream, "step", step)
+    bench_stream.main(["--frames", "8"])
+
+
 def write_all(mp: pytest.MonkeyPatch, results: Path) -> None:
     write_render(mp, results)
     write_decide(mp)
+    write_stream(mp)
     write_fixture_step(mp)
     write_plan(mp)
     write_rollout(mp)
