@@ -113,14 +113,7 @@ def intrinsics_problem(intrinsics: CameraIntrinsics) -> str | None:
     if size is not None:
         return size
     try:
-        requests.Intrinsics(
-            width=intrinsics.width,
-            height=intrinsics.height,
-            fx=float(intrinsics.fx),
-            fy=float(intrinsics.fy),
-            cx=float(intrinsics.cx),
-            cy=float(intrinsics.cy),
-        )
+        intrinsics.wire()
     except ValidationError as error:
         first = error.errors()[0]
         name = ".".join(str(part) for part in first["loc"])

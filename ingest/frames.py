@@ -11,6 +11,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
+from api_schema.requests import Intrinsics
 from pbdag_errors import Refused
 
 
@@ -48,6 +49,17 @@ class CameraIntrinsics:
     fy: float
     cx: float
     cy: float
+
+    def wire(self) -> Intrinsics:
+        """The wire's intrinsics (its model checks the bounds: ValidationError beyond them)."""
+        return Intrinsics(
+            width=self.width,
+            height=self.height,
+            fx=float(self.fx),
+            fy=float(self.fy),
+            cx=float(self.cx),
+            cy=float(self.cy),
+        )
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
-from api_schema.requests import BatchIn, DepthImage, DetectionIn, FrameIn, Intrinsics
+from api_schema.requests import BatchIn, DepthImage, DetectionIn, FrameIn
 from ingest.detectors import Detection
 from ingest.frames import SourceFrame
 from pbdag_client.encoding import encode_depth_png16, encode_mask
@@ -44,14 +44,7 @@ def frame_in(frame: SourceFrame, detections: Sequence[Detection]) -> FrameIn:
     return FrameIn(
         frame_id=frame.frame_id,
         timestamp=float(frame.timestamp),
-        intrinsics=Intrinsics(
-            width=intrinsics.width,
-            height=intrinsics.height,
-            fx=float(intrinsics.fx),
-            fy=float(intrinsics.fy),
-            cx=float(intrinsics.cx),
-            cy=float(intrinsics.cy),
-        ),
+        intrinsics=intrinsics.wire(),
         pose=[[float(value) for value in row] for row in np.asarray(frame.pose, dtype=np.float64)],
         depth=encode_depth(frame),
         detections=[detection_in(detection) for detection in detections],

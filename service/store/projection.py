@@ -205,9 +205,13 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
     write transaction locks the scene's row (an append updates it, so appends to this scene
     wait), folds whatever was appended meanwhile, reads the projections as they stand at that
     head, compares and rewrites them. The report compares like with like, at one head seq."""
-    with read_transaction(log.engine) as connection:  # the snapshots up to one head seq
+    with read_transaction(log.engine) as connection:  # the snapshots' seqs up to one head seq
         head = log.scene(scene_id, connection).head_seq
-        early_snapshots = set(_projections(connection, scene_id)[1])
+        early_snapshots = set(
+            connection.execute(
+                sa.select(snapshots.c.seq).where(snapshots.c.scene_id == scene_id)
+            ).scalars()
+        )
     replay = _Replay()
     replay.feed(log.iter_events(scene_id, up_to=head), early_snapshots)
     with write_transaction(log.engine) as connection:

@@ -4,6 +4,7 @@ database and data directory), and the recordings written from the real kitchen f
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import subprocess
 import sys
@@ -111,3 +112,19 @@ def recordings(real_kitchen: Path, tmp_path_factory: pytest.TempPathFactory) -> 
         mcap_bag=write_bag(real_kitchen, root / "mcap_bag", 5, mcap=True),
         labels=write_label_map(root / "labels.json"),
     )
+
+
+@pytest.fixture(autouse=True)
+def _logging_as_a_new_process() -> Iterator[None]:
+    """`pbdag ingest` runs in this process: the root logger as a fresh process has it (no
+    handler an earlier test's `configure_logging` left behind, whose INFO lines would join the
+    one line of stderr an error prints)."""
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    root.handlers.clear()
+    root.setLevel(logging.WARNING)
+    try:
+        yield
+    finally:
+        root.handlers[:] = handlers
+        root.setLevel(level)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import base64
 import copy
 import json
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -19,17 +18,6 @@ from service.cli import OPENAPI_PATH
 from service.worker import Worker
 from tests.clients import local_client
 from tests.wire_scenes import batch
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container)) as test_client:
-        yield test_client
-
-
-@pytest.fixture
-def scene_id(client: TestClient) -> str:
-    return str(client.post("/v1/scenes", json={"name": "hall"}).json()["id"])
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import io
 import json
-from collections.abc import Iterator
 from pathlib import Path
 
 import networkx as nx
@@ -38,12 +37,6 @@ def post_story(client: TestClient, container: Container) -> tuple[str, int]:
     confirmed_at = int(confirms["events"][0]["seq"])
     assert confirmed_at < int(removals["events"][0]["seq"])
     return scene_id, confirmed_at
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container)) as test_client:
-        yield test_client
 
 
 def read_graphml(body: bytes) -> nx.DiGraph:

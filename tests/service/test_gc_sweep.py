@@ -8,30 +8,21 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from fastapi.testclient import TestClient
 
-from service.app import create_app
 from service.bootstrap import Container
 from service.retention import ORPHAN_GRACE_SECONDS, collect
 from service.store.blobs import BlobNotFound, FileBlobStore
 from service.worker import Worker
-from tests.clients import local_client
 from tests.service.invariants import blobs_agree_with_rows, projections_equal_a_replay
 from tests.wire_scenes import batch
 
 
 class Killed(BaseException):
     """The process died here (not an Exception: nothing may catch it on the way out)."""
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container, run_worker=False)) as test_client:
-        yield test_client
 
 
 def posted_and_done(client: TestClient, container: Container, count: int) -> str:

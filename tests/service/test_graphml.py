@@ -5,29 +5,19 @@ from __future__ import annotations
 
 import io
 import xml.etree.ElementTree as ET
-from collections.abc import Iterator
 from dataclasses import replace
 
 import networkx as nx
-import pytest
 from fastapi.testclient import TestClient
 
-from service.app import create_app
 from service.bootstrap import Container
 from service.export import export_graph
 from service.store.engine import write_transaction
 from service.worker import Worker
-from tests.clients import local_client
 from tests.service.minimal_events import added
 from tests.wire_scenes import batch
 
 NS = {"g": "http://graphml.graphdrawing.org/xmlns"}
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container)) as test_client:
-        yield test_client
 
 
 def keys_of(document: bytes) -> dict[str, tuple[str, str, str]]:

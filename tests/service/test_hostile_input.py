@@ -9,7 +9,6 @@ import base64
 import dataclasses
 import io
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -21,17 +20,6 @@ from service.app import create_app
 from service.bootstrap import Container
 from tests.clients import local_client
 from tests.wire_bodies import batch_body, frame_body, rle_of
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container)) as test_client:
-        yield test_client
-
-
-@pytest.fixture
-def scene_id(client: TestClient) -> str:
-    return str(client.post("/v1/scenes", json={"name": "hall"}).json()["id"])
 
 
 def rejected(

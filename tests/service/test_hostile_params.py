@@ -3,7 +3,6 @@ pages: each refused with a 422 naming the field, nothing created."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -13,15 +12,6 @@ from core.events import SceneCreated
 from core.evolve import fold
 from core.params import MAX_CLASS_SCORE_CELLS, Params
 from core.state import SceneState
-from service.app import create_app
-from service.bootstrap import Container
-from tests.clients import local_client
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container)) as test_client:
-        yield test_client
 
 
 def refused(client: TestClient, params: Any, field: str, reason: str) -> None:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import schemathesis
 from hypothesis import HealthCheck, settings
@@ -54,18 +54,27 @@ CHECKS = [
     response_headers_conformance,
 ]
 
-
-@schema.parametrize()
-@settings(
+# A few derandomized examples per operation (`make fuzz` runs more).
+FUZZED = settings(
     max_examples=EXAMPLES,
     deadline=None,
     suppress_health_check=list(HealthCheck),
     derandomize=True,
 )
-def test_no_server_error_and_every_answer_as_documented(case: OpenApiCase) -> None:
+
+
+def call(case: OpenApiCase, checks: list[Any]) -> None:
+    """The case against the app with the admin token, in the scene that exists (past the 404 of
+    an unknown scene)."""
     if case.path_parameters and "scene_id" in case.path_parameters:
-        case.path_parameters["scene_id"] = SCENE.id  # past the 404 of an unknown scene
-    case.call_and_validate(headers={"Authorization": f"Bearer {TOKEN}"}, checks=CHECKS)
+        case.path_parameters["scene_id"] = SCENE.id
+    case.call_and_validate(headers={"Authorization": f"Bearer {TOKEN}"}, checks=checks)
+
+
+@schema.parametrize()
+@FUZZED
+def test_no_server_error_and_every_answer_as_documented(case: OpenApiCase) -> None:
+    call(case, CHECKS)
 
 
 # Bodies whose validity JSON Schema cannot state whole, so that valid-by-schema data may be
@@ -81,16 +90,6 @@ CONTENT_CHECKED = [
 
 
 @schema.exclude(method="POST", path=CONTENT_CHECKED).parametrize()
-@settings(
-    max_examples=EXAMPLES,
-    deadline=None,
-    suppress_health_check=list(HealthCheck),
-    derandomize=True,
-)
+@FUZZED
 def test_what_the_schema_calls_valid_is_accepted(case: OpenApiCase) -> None:
-    if case.path_parameters and "scene_id" in case.path_parameters:
-        case.path_parameters["scene_id"] = SCENE.id
-    case.call_and_validate(
-        headers={"Authorization": f"Bearer {TOKEN}"},
-        checks=[not_a_server_error, positive_data_acceptance],
-    )
+    call(case, [not_a_server_error, positive_data_acceptance])

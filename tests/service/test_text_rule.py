@@ -5,16 +5,12 @@ from __future__ import annotations
 
 import json
 import re
-from collections.abc import Iterator
 
 import httpx2
 import pytest
 from fastapi.testclient import TestClient
 
 from api_schema.text import PRINTABLE, first_refused, kind_of, replace_refused
-from service.app import create_app
-from service.bootstrap import Container
-from tests.clients import local_client
 from tests.wire_bodies import batch_body, frame_body
 
 # What XML 1.0 forbids (U+FFFE, U+FFFF), the other non-characters (the first and last of the
@@ -23,17 +19,6 @@ REFUSED = ["\ufffe", "\uffff", "\ufdd0", "\ufdef", "\U0001fffe", "\U0010ffff", "
 # Text that must still pass: accents, CJK, an emoji, the replacement character, private use,
 # and a C1 control (XML 1.0 and JSON allow it; the rule does not refuse it).
 ACCEPTED = ["tasse à café", "马克杯", "mug 🍵", "\ufffd", "\ue000", "a\x85b"]
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container)) as test_client:
-        yield test_client
-
-
-@pytest.fixture
-def scene_id(client: TestClient) -> str:
-    return str(client.post("/v1/scenes", json={"name": "hall"}).json()["id"])
 
 
 def refused(response: httpx2.Response, field: str, character: str) -> None:

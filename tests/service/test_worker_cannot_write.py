@@ -9,7 +9,6 @@ import resource
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -26,12 +25,6 @@ from tests.service.invariants import blobs_agree_with_rows, projections_equal_a_
 from tests.wire_scenes import batch
 
 DISK_FULL = StoreUnavailable("writing", OSError(28, "No space left on device"))
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container, run_worker=False)) as test_client:
-        yield test_client
 
 
 def queued(client: TestClient, count: int) -> str:

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -14,20 +13,12 @@ from fastapi.testclient import TestClient
 from core.events import Event
 from core.observation import Batch
 from core.state import SceneState
-from service.app import create_app
 from service.bootstrap import Container
 from service.repair import repair_scene
 from service.store.projection import rebuild_scene
 from service.worker import Worker
-from tests.clients import local_client
 from tests.service.minimal_events import an_add, poison_the_log
 from tests.wire_bodies import batch_body, frame_body
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container)) as test_client:
-        yield test_client
 
 
 def post(client: TestClient, scene_id: str, batch_id: str) -> None:

@@ -2,23 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
-import pytest
 from fastapi.testclient import TestClient
 
-from service.app import create_app
 from service.bootstrap import Container
 from service.worker import Worker
-from tests.clients import local_client
 from tests.service.minimal_events import added
 from tests.wire_bodies import batch_body, frame_body
-
-
-@pytest.fixture
-def client(container: Container) -> Iterator[TestClient]:
-    with local_client(create_app(container)) as test_client:
-        yield test_client
 
 
 def test_a_command_between_batches_keeps_the_fixture_clusters(
