@@ -19,9 +19,9 @@ from core.evolve import fold
 from core.params import Params
 from core.state import SceneState
 from core.values import BaselineSource
+from service.store.append_sql import insert_rows
 from service.store.engine import gc_paused, read_transaction
 from service.store.errors import (
-    ConcurrencyConflict,
     NonFiniteEvent,
     SceneNotFound,
     SeqOutOfRange,
@@ -36,41 +36,6 @@ READ_PAGE = 5000
 SNAPSHOT_AT_OR_BEFORE_BINARY = (
     "SELECT format_version, body FROM snapshots WHERE scene_id = %s AND seq <= %s "
     "ORDER BY seq DESC LIMIT 1"
-)
-
-# The conditional head update, built once (the append is the hot path).
-HEAD_UPDATE = (
-    sa.update(scenes)
-    .where(scenes.c.id == sa.bindparam("scene_id"), scenes.c.head_seq == sa.bindparam("expected"))
-    .values(head_seq=scenes.c.head_seq + sa.bindparam("count", type_=sa.BigInteger))
-)
-
-# The append on PostgreSQL: the conditional head update and the insert of the rows (arrays of
-# the columns, unnested in order) in one statement. When the head is not the expected one the
-# update matches nothing and no row is inserted; the updated scene row stays locked until commit,
-# so writers of one scene are serialized and the seq stays gapless and commit-ordered.
-# Measured against the update then an executemany of the rows: 1.4 times the events per
-# second in batches of 20, slower from about 100 on (the arrays' text costs more than the
-# round trip saved), so larger batches take the two statements.
-ONE_STATEMENT_MAX = 32
-ARRAY_COLUMNS = ("type", "track_id", "state", "frame_id", "details")
-POSTGRES_APPEND = sa.text(
-    """
-    WITH head AS (
-        UPDATE scenes SET head_seq = head_seq + :count
-        WHERE id = CAST(:scene_id AS text) AND head_seq = :expected
-        RETURNING head_seq
-    )
-    INSERT INTO events
-        (scene_id, seq, type, track_id, state, batch_id, frame_id, recorded_at, details)
-    SELECT CAST(:scene_id AS text), CAST(:expected AS bigint) + row.n, row.type, row.track_id,
-        row.state, CAST(:batch_id AS text), row.frame_id, CAST(:recorded_at AS double precision),
-        row.details
-    FROM head, unnest(
-        CAST(:types AS text[]), CAST(:track_ids AS text[]), CAST(:states AS text[]),
-        CAST(:frame_ids AS text[]), CAST(:detailss AS text[])
-    ) WITH ORDINALITY AS row(type, track_id, state, frame_id, details, n)
-    """
 )
 
 
@@ -265,28 +230,7 @@ class EventLog:
             self._event_row(scene_id, expected_head + 1 + i, event, batch_id, now)
             for i, event in enumerate(new_events)
         ]  # before any write: a non-finite number stops the append here
-        if connection.dialect.name == "postgresql" and count <= ONE_STATEMENT_MAX:
-            # One statement, one round trip: the head update gates the insert of every row.
-            inserted = connection.execute(
-                POSTGRES_APPEND,
-                {
-                    "scene_id": scene_id,
-                    "expected": expected_head,
-                    "count": count,
-                    "batch_id": batch_id,
-                    "recorded_at": now,
-                    **{f"{column}s": [row[column] for row in rows] for column in ARRAY_COLUMNS},
-                },
-            ).rowcount
-            if inserted != count:
-                raise ConcurrencyConflict(f"scene {scene_id!r}: head is not {expected_head}")
-            return expected_head + 1, expected_head + count
-        result = connection.execute(
-            HEAD_UPDATE, {"scene_id": scene_id, "expected": expected_head, "count": count}
-        )
-        if result.rowcount != 1:
-            raise ConcurrencyConflict(f"scene {scene_id!r}: head is not {expected_head}")
-        connection.execute(events.insert(), rows)
+        insert_rows(connection, scene_id, expected_head, rows, batch_id, now)
         return expected_head + 1, expected_head + count
 
     def read(

@@ -15,6 +15,7 @@ from core.state import SceneState
 from service.bootstrap import Container
 from service.commands import create_scene, run_command
 from service.settings import Settings
+from service.store.append_sql import ONE_STATEMENT_MAX
 from service.store.engine import make_engine, write_transaction
 from service.store.errors import (
     BatchConflict,
@@ -23,7 +24,7 @@ from service.store.errors import (
     SceneNotFound,
     SeqOutOfRange,
 )
-from service.store.event_log import ONE_STATEMENT_MAX, SceneRecord
+from service.store.event_log import SceneRecord
 from service.store.projection import rebuild_scene
 from service.store.queue_records import (
     Admission,
