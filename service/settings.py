@@ -12,6 +12,7 @@ from codec.observations import InputLimits
 from pbdag_errors import Refused
 from service.security_settings import SecuritySettings, with_database_password
 
+POSTGRES_SCHEMES = ("postgres://", "postgresql://")  # normalised to postgresql+psycopg://
 DURATION_UNITS = {"s": 1.0, "m": 60.0, "h": 3600.0, "d": 86400.0}
 
 
@@ -69,7 +70,8 @@ class Settings(SecuritySettings):
     )
     database_url: str | None = Field(
         None,
-        description="SQLAlchemy URL; default sqlite:///<data_dir>/pbdag.db. PostgreSQL: postgresql+psycopg://...",
+        description="SQLAlchemy URL; default sqlite:///<data_dir>/pbdag.db. PostgreSQL: "
+        "postgresql+psycopg://... (postgres:// and postgresql:// mean the same: psycopg 3).",
     )
     blob_backend: Literal["auto", "postgres", "folder"] = Field(
         "auto",
@@ -140,6 +142,18 @@ class Settings(SecuritySettings):
     state_cache_scenes: int = Field(
         64, description="Scene states a worker keeps in memory between batches."
     )
+
+    @field_validator("database_url")
+    @classmethod
+    def _psycopg(cls, value: str | None) -> str | None:
+        """`postgres://` (Heroku, libpq) and `postgresql://` use psycopg 3, the driver installed
+        (SQLAlchemy would look for psycopg2, or not know `postgres` at all)."""
+        if value is None:
+            return None
+        for scheme in POSTGRES_SCHEMES:
+            if value.startswith(scheme):
+                return "postgresql+psycopg://" + value[len(scheme) :]
+        return value
 
     @field_validator("raw_retention", mode="before")
     @classmethod
