@@ -86,14 +86,20 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         "resumes an interrupted one. Stop the API and the workers first, then start them with "
         "PBDAG_BLOB_BACKEND set to the target. The source is left as it was.",
     )
-    migrate.add_argument("--to", required=True, choices=("postgres", "folder"), dest="target")
+    migrate.add_argument(
+        "--to",
+        required=True,
+        choices=("postgres", "folder"),
+        dest="target",
+        help="the backend to copy into: the database's blobs table, or PBDAG_DATA_DIR/blobs",
+    )
     migrate.set_defaults(handler=_blobs_migrate)
 
 
 def _rebuild(args: argparse.Namespace) -> int:
-    from service.bootstrap import build_container
+    from service.cli_support import open_container
 
-    container = build_container()
+    container = open_container()
     try:
         return _rebuild_scenes(container.log, args.scene)
     finally:
@@ -146,9 +152,9 @@ def _rebuild_scenes(log: EventLog, only: list[str] | None) -> int:
 
 
 def _requeue(args: argparse.Namespace) -> int:
-    from service.bootstrap import build_container
+    from service.cli_support import open_container
 
-    container = build_container()
+    container = open_container()
     dead = [record for record in container.queue.of_scene(args.scene) if record.status == "dead"]
     collected = [record.batch_id for record in dead if record.blob_collected_at is not None]
     if not args.batch and collected:
@@ -174,10 +180,10 @@ def _requeue(args: argparse.Namespace) -> int:
 
 
 def _repair(args: argparse.Namespace) -> int:
-    from service.bootstrap import build_container
+    from service.cli_support import open_container
     from service.repair import repair_scene
 
-    container = build_container()
+    container = open_container()
     try:
         report = repair_scene(container, args.scene)
     except PbdagError as error:
@@ -201,11 +207,11 @@ def _repair(args: argparse.Namespace) -> int:
 
 
 def _gc(args: argparse.Namespace) -> int:
-    from service.bootstrap import build_container
+    from service.cli_support import open_container
     from service.retention import collect
     from service.settings import parse_duration
 
-    container = build_container()
+    container = open_container()
     retention = container.settings.raw_retention
     if args.retention is not None:
         try:
@@ -248,12 +254,12 @@ def _gc(args: argparse.Namespace) -> int:
 
 def _export(args: argparse.Namespace) -> int:
     from core.graph import publish
-    from service.bootstrap import build_container
+    from service.cli_support import open_container
     from service.export import export_graph
     from service.states import StateReader
     from service.store.errors import SceneQuarantined
 
-    container = build_container()
+    container = open_container()
     try:
         scene = container.log.scene(args.scene)
         if scene.quarantined is not None:
@@ -279,11 +285,11 @@ def _export(args: argparse.Namespace) -> int:
 
 
 def _blobs_migrate(args: argparse.Namespace) -> int:
-    from service.bootstrap import build_container
+    from service.cli_support import load_settings, open_container
     from service.store.engine import is_postgres
 
-    settings = Settings()
-    container = build_container(settings.model_copy(update={"blob_backend": "folder"}))
+    settings = load_settings()
+    container = open_container(settings.model_copy(update={"blob_backend": "folder"}))
     try:
         if not is_postgres(container.engine):
             print(

@@ -32,7 +32,8 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
         action="append",
         required=True,
         metavar="{read,write,admin}",
-        help="repeatable; admin implies write, write implies read",
+        help="what the token may do (repeatable): read, write or admin; admin implies write, "
+        "write implies read",
     )
     create.set_defaults(handler=_create)
 
@@ -40,21 +41,22 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     listing.set_defaults(handler=_list)
 
     revoke = actions.add_parser("revoke", help="revoke a token by its id (see `pbdag token list`)")
-    revoke.add_argument("id")
+    revoke.add_argument("id", metavar="ID", help="the token's id, the first column of the list")
     revoke.set_defaults(handler=_revoke)
 
 
 def _engine() -> sa.Engine:
-    from service.bootstrap import build_container
+    from service.cli_support import open_container
 
-    return build_container().engine
+    return open_container().engine
 
 
 def _create(args: argparse.Namespace) -> int:
     from service.auth import create_token
 
+    engine = _engine()  # its SettingsError is main's to report, not a scope's
     try:
-        created = create_token(_engine(), args.name, args.scopes)
+        created = create_token(engine, args.name, args.scopes)
     except ValueError as error:
         print(f"pbdag token create: {error}", file=sys.stderr)
         return 2

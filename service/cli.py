@@ -1,36 +1,127 @@
 """`pbdag`: serve the API, run workers, migrate, export the OpenAPI file (and the commands of
-service/auth_cli.py and service/admin_cli.py)."""
+service/auth_cli.py and service/admin_cli.py).
+
+Exit codes: 0 done, 1 the command ran and found a problem, 2 a configuration or usage error (one
+line on stderr), 3 `serve` could not listen on its port, 141 standard output closed early.
+"""
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
+import socket
 import sys
-import textwrap
 import threading
-from importlib.metadata import entry_points
+from importlib.metadata import PackageNotFoundError, entry_points, version
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from pydantic import ValidationError
 
 from pbdag_errors import PbdagError
 from service.admin_cli import register as register_admin_commands
 from service.auth_cli import register as register_token_commands
+from service.cli_support import (
+    load_settings,
+    open_container,
+    redacted,
+    setting_help,
+    settings_epilog,
+    settings_problem,
+)
 from service.logs import configure_logging
 from service.settings import Settings, SettingsError
 
 if TYPE_CHECKING:
+    from fastapi import FastAPI
+
     from service.bootstrap import Container
     from service.worker import Worker
 
 OPENAPI_PATH = Path(__file__).resolve().parents[1] / "api_schema" / "openapi.json"
 
 
+DISTRIBUTION = "pbdag"  # [project] name in pyproject.toml
+DESCRIPTION = (
+    "The long-term 3D scene-graph memory of a robot: serve its HTTP API, run workers, create or "
+    "upgrade the database, manage API tokens, rebuild, repair and export scenes, collect old raw "
+    "batches, move them between blob backends."
+)
+EPILOG = (
+    "`pbdag COMMAND --help` lists a command's options. Every command that opens the database "
+    "names it on stderr; all but `serve` and `migrate` stop (exit 2) when its SQLite file does "
+    "not exist. A configuration error is one line naming the variable, exit 2."
+)
+STDOUT_CLOSED = 141  # 128 + SIGPIPE, what a shell reports for a command whose reader left
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the `pbdag` command."""
-    parser = argparse.ArgumentParser(prog="pbdag", description=__doc__)
-    commands = parser.add_subparsers(dest="command", required=True)
+    try:
+        return run(build_parser().parse_args(argv))
+    except BrokenPipeError:  # `pbdag gc --dry-run | head -1`: the reader left; nothing to say
+        return stdout_closed()
 
+
+def build_parser() -> argparse.ArgumentParser:
+    """`pbdag` and every subcommand, the plugins' (`pbdag.commands` entry points) included."""
+    parser = argparse.ArgumentParser(prog="pbdag", description=DESCRIPTION, epilog=EPILOG)
+    parser.add_argument(
+        "--version", action="version", version=f"pbdag {package_version()}", help="print it, exit"
+    )
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    add_service_commands(commands)
+    register_token_commands(commands)  # `pbdag token create|list|revoke`
+    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|gc|export|blobs`
+    for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from evaluation
+        try:
+            entry_point.load()(commands)
+        except Exception as error:  # a broken plugin must not take the service's commands down
+            print(f"pbdag: command {entry_point.name!r} unavailable: {error}", file=sys.stderr)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the chosen command; a configuration error is one line on stderr and exit code 2."""
+    try:
+        code = int(args.handler(args))
+        if sys.stdout is not None:  # None: started with stdout closed (`>&-`)
+            sys.stdout.flush()  # here, where a closed pipe is caught, not at interpreter exit
+        return code
+    except SettingsError as error:  # settings that cannot work together: say which, start nothing
+        print(f"pbdag: {error}", file=sys.stderr)
+        return 2
+    except ValidationError as error:  # Settings() read somewhere else than load_settings
+        if error.title != Settings.__name__:
+            raise
+        print(f"pbdag: {settings_problem(error)}", file=sys.stderr)
+        return 2
+
+
+def stdout_closed() -> int:
+    """Point stdout at /dev/null (Python flushes it once more on exit) and return 141."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # a stdout without a descriptor (a test's capture)
+        pass
+    finally:
+        os.close(devnull)
+    return STDOUT_CLOSED
+
+
+def package_version() -> str:
+    """The installed distribution's version (`unknown` when run from an uninstalled tree)."""
+    try:
+        return version(DISTRIBUTION)
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def add_service_commands(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """`serve`, `worker`, `migrate` and `openapi`."""
     serve = commands.add_parser(
         "serve",
         help="run the HTTP API (with an in-process worker by default)",
@@ -46,9 +137,11 @@ def main(argv: list[str] | None = None) -> int:
         dest="run_worker",
         action="store_const",
         const=False,
-        help=setting_help("run_worker", "API only; run `pbdag worker` separately"),
+        help="API only, no worker in this process; run `pbdag worker` separately "
+        "(env PBDAG_RUN_WORKER=false; default: a worker runs in the API process)",
     )
     add_logging_options(serve)
+    serve.set_defaults(handler=_serve)
 
     worker = commands.add_parser(
         "worker",
@@ -65,66 +158,21 @@ def main(argv: list[str] | None = None) -> int:
         ),
     )
     add_logging_options(worker)
+    worker.set_defaults(handler=_worker)
 
-    commands.add_parser("migrate", help="create or upgrade the database schema")
+    migrate = commands.add_parser(
+        "migrate", help="create the database (and its folder) or upgrade its schema"
+    )
+    migrate.set_defaults(handler=_migrate)
 
     openapi = commands.add_parser("openapi", help="write the OpenAPI document")
-    openapi.add_argument("--out", type=Path, default=OPENAPI_PATH)
-    register_token_commands(commands)  # `pbdag token create|list|revoke`
-    register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|gc|export|blobs`
-
-    for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from evaluation
-        try:
-            entry_point.load()(commands)
-        except Exception as error:  # a broken plugin must not take the service's commands down
-            print(f"pbdag: command {entry_point.name!r} unavailable: {error}", file=sys.stderr)
-    args = parser.parse_args(argv)
-    handlers = {
-        "serve": _serve,
-        "worker": _worker,
-        "migrate": _migrate,
-        "openapi": _openapi,
-    }
-    try:
-        if hasattr(args, "handler"):
-            return int(args.handler(args))
-        return handlers[args.command](args)
-    except SettingsError as error:  # settings that cannot work together: say which, start nothing
-        print(f"pbdag: {error}", file=sys.stderr)
-        return 2
-
-
-def env_name(field: str) -> str:
-    """The environment variable of a setting."""
-    return f"PBDAG_{field.upper()}"
-
-
-def shown_default(field: str) -> str:
-    """A setting's default as a person would type it."""
-    info = Settings.model_fields[field]
-    value = info.get_default(call_default_factory=True)
-    if value is None:
-        return "unset"
-    if isinstance(value, bool):
-        return str(value).lower()
-    if isinstance(value, list):
-        return ",".join(str(item) for item in value) or "empty"
-    return str(value)
-
-
-def setting_help(field: str, text: str) -> str:
-    """Help of an option that overrides a setting: its default and its variable."""
-    return f"{text} (default: {shown_default(field)}; env {env_name(field)})"
-
-
-def settings_epilog() -> str:
-    """Every setting: its variable, default and meaning (from service/settings.py)."""
-    lines = ["environment (also a file /run/secrets/<variable in lower case>):"]
-    for field, info in Settings.model_fields.items():
-        lines.append(f"  {env_name(field)}={shown_default(field)}")
-        for line in textwrap.wrap(info.description or "", 72):
-            lines.append(f"      {line}")
-    return "\n".join(lines)
+    openapi.add_argument(
+        "--out",
+        type=Path,
+        default=OPENAPI_PATH,
+        help=f"the file to write (default: {OPENAPI_PATH.relative_to(OPENAPI_PATH.parents[1])})",
+    )
+    openapi.set_defaults(handler=_openapi)
 
 
 def add_logging_options(command: argparse.ArgumentParser) -> None:
@@ -143,7 +191,7 @@ def add_logging_options(command: argparse.ArgumentParser) -> None:
 
 def settings_with(args: argparse.Namespace, **fields: str) -> Settings:
     """The settings, with the options given on the command line (argument -> setting)."""
-    settings = Settings()
+    settings = load_settings()
     for argument, field in fields.items():
         value = getattr(args, argument, None)
         if value is not None:
@@ -153,11 +201,8 @@ def settings_with(args: argparse.Namespace, **fields: str) -> Settings:
 
 
 def _serve(args: argparse.Namespace) -> int:
-    import uvicorn
-
     from service.app import create_app
     from service.auth_cli import access_summary, serve_refusal
-    from service.bootstrap import build_container
     from service.security import hosts_when_serving
 
     settings = settings_with(
@@ -169,14 +214,24 @@ def _serve(args: argparse.Namespace) -> int:
         log_level="log_level",
     )
     settings.allowed_hosts = hosts_when_serving(settings.allowed_hosts, settings.host)
-    container = build_container(settings)
+    container = open_container(settings, create=True)
     refusal = serve_refusal(settings.host, container.engine)  # before binding anything
     if refusal is not None:
         print(refusal, file=sys.stderr)
         return 2
+    try:
+        listener = bound_socket(settings.host, settings.port)  # before saying where the API is
+    except OSError as error:
+        print(
+            f"pbdag serve: cannot listen on {settings.host}:{settings.port}: "
+            f"{error.strerror or error}; choose another with --port or PBDAG_PORT, "
+            "or stop the process that holds it",
+            file=sys.stderr,
+        )
+        container.engine.dispose()
+        return 3
     print(
-        f"pbdag: database {_redacted(settings.resolved_database_url())}, "
-        f"raw batches in {blob_location(container.blobs)} "
+        f"pbdag: raw batches in {blob_location(container.blobs)} "
         f"(PBDAG_BLOB_BACKEND={settings.blob_backend})"
     )
     print(
@@ -185,11 +240,30 @@ def _serve(args: argparse.Namespace) -> int:
     )
     print(f"pbdag: allowed Host names {', '.join(settings.allowed_hosts)} (PBDAG_ALLOWED_HOSTS)")
     print(access_summary(container.engine, settings.allow_anonymous_local), flush=True)
-    app = create_app(container, run_worker=settings.run_worker)
+    return _run_server(create_app(container, run_worker=settings.run_worker), settings, listener)
+
+
+def bound_socket(host: str, port: int) -> socket.socket:
+    """A TCP socket bound to host:port as uvicorn binds one (OSError when the port is taken)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((host, port))
+    except OSError:
+        sock.close()
+        raise
+    sock.set_inheritable(True)
+    return sock
+
+
+def _run_server(app: FastAPI, settings: Settings, listener: socket.socket) -> int:
+    import uvicorn
+
     # log_config=None: uvicorn's records go through the handler configured above (text or JSON).
     # X-Forwarded-For names the client only when a trusted proxy sent it (uvicorn's own default
     # trusts it from loopback); with no proxy listed, uvicorn does not read it at all.
-    uvicorn.run(
+    config = uvicorn.Config(
         app,
         host=settings.host,
         port=settings.port,
@@ -198,19 +272,23 @@ def _serve(args: argparse.Namespace) -> int:
         proxy_headers=bool(settings.trusted_proxies),
         forwarded_allow_ips=settings.trusted_proxies,
     )
-    return 0
+    server = uvicorn.Server(config)
+    try:
+        server.run(sockets=[listener])
+    finally:
+        listener.close()
+    return 0 if server.started else 3  # as uvicorn.run: 3 when the server did not start
 
 
 def _worker(args: argparse.Namespace) -> int:
     from prometheus_client import start_http_server
 
-    from service.bootstrap import build_container
     from service.worker import Worker
 
     settings = settings_with(
         args, metrics_port="metrics_port", log_format="log_format", log_level="log_level"
     )
-    container = build_container(settings)
+    container = open_container(settings)
     if settings.metrics_port:
         start_http_server(settings.metrics_port, "127.0.0.1", container.metrics.registry)
         print(f"pbdag worker: metrics on http://127.0.0.1:{settings.metrics_port}/metrics")
@@ -255,11 +333,16 @@ def _left_undone(container: Container, worker: Worker) -> int:
 
 
 def _migrate(_args: argparse.Namespace) -> int:
-    from service.bootstrap import build_container
+    from service.cli_support import migrated
 
     configure_logging()
-    container = build_container()
-    print(f"pbdag: schema of {_redacted(container.settings.resolved_database_url())} is up to date")
+    url, before, after = migrated(load_settings())
+    if before is None:
+        print(f"pbdag: migrated an empty database {redacted(url)} to revision {after}")
+    elif before != after:
+        print(f"pbdag: migrated {redacted(url)} from revision {before} to {after}")
+    else:
+        print(f"pbdag: schema of {redacted(url)} is up to date (revision {after})")
     return 0
 
 
@@ -271,7 +354,7 @@ def _openapi(args: argparse.Namespace) -> int:
     from service.store.engine import make_engine
 
     container = build_container(
-        Settings(), blobs=MemoryBlobStore(), engine=make_engine("sqlite://")
+        load_settings(), blobs=MemoryBlobStore(), engine=make_engine("sqlite://")
     )
     document = create_app(container).openapi()
     args.out.write_text(json.dumps(document, indent=2, sort_keys=True) + "\n")
@@ -288,13 +371,6 @@ def blob_location(blobs: object) -> str:
     if isinstance(blobs, FileBlobStore):
         return f"the folder {blobs.root.resolve()}"
     return type(blobs).__name__
-
-
-def _redacted(url: str) -> str:
-    """The URL without its password."""
-    from sqlalchemy import make_url
-
-    return make_url(url).render_as_string(hide_password=True)
 
 
 if __name__ == "__main__":

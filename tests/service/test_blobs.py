@@ -151,7 +151,9 @@ def test_auto_picks_the_table_on_postgres_and_the_folder_on_sqlite(
 def test_postgres_blobs_on_sqlite_stop_the_command_with_a_clear_message(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    engine = make_engine(f"sqlite:///{tmp_path / 'x.db'}")
+    engine = make_engine(f"sqlite:///{tmp_path / 'pbdag.db'}")
+    with engine.connect():  # the file exists: the commands below refuse a missing one first
+        pass
     with pytest.raises(SettingsError, match="PBDAG_BLOB_BACKEND=postgres needs a PostgreSQL"):
         blob_store(Settings(blob_backend="postgres", data_dir=tmp_path), engine)
     assert type(blob_store(Settings(blob_backend="folder", data_dir=tmp_path), engine)) is (
@@ -167,6 +169,9 @@ def test_postgres_blobs_on_sqlite_stop_the_command_with_a_clear_message(
     monkeypatch.setenv("PBDAG_BLOB_BACKEND", "auto")
     assert main(["blobs", "migrate", "--to", "postgres"]) == 2
     assert "the database is not PostgreSQL" in capsys.readouterr().err
+    monkeypatch.setenv("PBDAG_BLOB_BACKEND", "postgres")
+    assert main(["migrate"]) == 2  # the one command that may create the database refuses too
+    assert "PBDAG_BLOB_BACKEND=postgres needs a PostgreSQL database" in capsys.readouterr().err
     monkeypatch.setenv("PBDAG_BLOB_BACKEND", "sideways")
     with pytest.raises(ValueError, match="blob_backend"):
         Settings()

@@ -4,9 +4,9 @@ of rate limits, and anonymous local access, through the app as `pbdag serve` han
 
 from __future__ import annotations
 
+import socket
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import pydantic
 import pytest
@@ -101,8 +101,9 @@ ServeFn = Callable[..., ASGIApp]
 
 @pytest.fixture
 def serve(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> ServeFn:
-    """Run `pbdag serve` with these PBDAG_* variables, up to uvicorn.run, and answer the ASGI
-    app uvicorn would serve with the options it was given (its proxy-headers layer included)."""
+    """Run `pbdag serve` with these PBDAG_* variables, up to uvicorn's Server.run, and answer the
+    ASGI app uvicorn would serve with the options it was given (its proxy-headers layer
+    included)."""
 
     def start(**variables: str) -> ASGIApp:
         monkeypatch.setenv("PBDAG_DATA_DIR", str(tmp_path))
@@ -110,17 +111,30 @@ def serve(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> ServeFn:
         monkeypatch.setenv("PBDAG_RUN_WORKER", "false")
         monkeypatch.setenv("PBDAG_RATE_LIMIT_PER_MINUTE", "60")
         monkeypatch.setenv("PBDAG_RATE_LIMIT_BURST", "5")
+        monkeypatch.setenv("PBDAG_PORT", str(free_port()))  # serve binds it before Server.run
         for name, value in variables.items():
             monkeypatch.setenv(f"PBDAG_{name}", value)
-        given: dict[str, Any] = {}
-        monkeypatch.setattr(uvicorn, "run", lambda app, **options: given.update(options, app=app))
+        given: dict[str, uvicorn.Config] = {}
+
+        def run(server: uvicorn.Server, sockets: list[socket.socket] | None = None) -> None:
+            given["config"] = server.config
+            server.started = True
+
+        monkeypatch.setattr(uvicorn.Server, "run", run)
         assert main(["serve"]) == 0
-        config = uvicorn.Config(given.pop("app"), **given)
+        config = given["config"]
         config.load()
         served: ASGIApp = config.loaded_app
         return served
 
     return start
+
+
+def free_port() -> int:
+    """A loopback port nobody listens on."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
 
 
 def statuses(client: TestClient, forwarded_for: list[str | None], **headers: str) -> list[int]:

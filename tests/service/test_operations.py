@@ -144,6 +144,7 @@ def test_pbdag_worker_log_format_json_from_the_command_line(
     assert main(["worker", "--drain", "--log-format", "json"]) == 0
     lines = [json.loads(line) for line in capsys.readouterr().err.splitlines() if line]
     assert any(r.get("batch_id") == "b7" and r.get("scene_id") == scene_id for r in lines)
+    assert any(r["message"] == f"database sqlite:///{tmp_path / 'pbdag.db'}" for r in lines)
 
 
 def test_serve_help_names_every_default_and_variable(capsys: pytest.CaptureFixture[str]) -> None:
@@ -154,7 +155,8 @@ def test_serve_help_names_every_default_and_variable(capsys: pytest.CaptureFixtu
     for option in (
         "--host HOST address to listen on (default: 127.0.0.1; env PBDAG_HOST)",
         "--port PORT port to listen on (default: 8000; env PBDAG_PORT)",
-        "(default: true; env PBDAG_RUN_WORKER)",
+        "--no-worker API only, no worker in this process; run `pbdag worker` separately "
+        "(env PBDAG_RUN_WORKER=false; default: a worker runs in the API process)",
         "(default: text; env PBDAG_LOG_FORMAT)",
         "(default: INFO; env PBDAG_LOG_LEVEL)",
     ):

@@ -26,9 +26,11 @@ TOKEN_LINE = re.compile(r"^pbdag_([0-9a-f]{12})_[A-Za-z0-9_-]{43}$")
 
 @pytest.fixture
 def data_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """`pbdag` commands in this test use a fresh SQLite database under a temp dir."""
+    """`pbdag` commands in this test use a fresh SQLite database under a temp dir (created by
+    `pbdag migrate`: the token commands refuse a database file that does not exist)."""
     monkeypatch.setenv("PBDAG_DATA_DIR", str(tmp_path))
     monkeypatch.delenv("PBDAG_DATABASE_URL", raising=False)
+    assert main(["migrate"]) == 0
     return tmp_path
 
 
