@@ -64,7 +64,7 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     ingest = commands.add_parser(
         "ingest", help="import a recorded folder or ROS 2 bag into a scene of a running service"
     )
-    sources = ingest.add_subparsers(dest="source", required=True)
+    sources = ingest.add_subparsers(dest="source", required=True, help="what the recording is")
 
     folder = sources.add_parser(
         "folder",

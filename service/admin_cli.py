@@ -74,7 +74,9 @@ def register(commands: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     export.set_defaults(handler=_export)
 
     blobs = commands.add_parser("blobs", help="the raw batches' storage")
-    blob_commands = blobs.add_subparsers(dest="blobs_command", required=True)
+    blob_commands = blobs.add_subparsers(
+        dest="blobs_command", required=True, help="what to do with the raw batches"
+    )
     migrate = blob_commands.add_parser(
         "migrate",
         help="copy every blob the queue names from the other backend to this one, checked by "

@@ -20,7 +20,9 @@ __all__ = ["access_summary", "register", "serve_refusal"]
 def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     """Add `token` and its subcommands to the `pbdag` parser."""
     token = commands.add_parser("token", help="create, list and revoke API bearer tokens")
-    actions = token.add_subparsers(dest="token_command", required=True)
+    actions = token.add_subparsers(
+        dest="token_command", required=True, help="what to do with tokens"
+    )
 
     create = actions.add_parser(
         "create", help="create a token and print it (once: only its hash is stored)"

@@ -71,7 +71,12 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--version", action="version", version=f"pbdag {package_version()}", help="print it, exit"
     )
-    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    commands = parser.add_subparsers(
+        dest="command",
+        required=True,
+        metavar="COMMAND",
+        help="`pbdag COMMAND --help` lists its options",
+    )
     add_service_commands(commands)
     register_token_commands(commands)  # `pbdag token create|list|revoke`
     register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|gc|export|blobs`
