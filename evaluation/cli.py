@@ -66,7 +66,9 @@ def register(commands: argparse._SubParsersAction) -> None:  # type: ignore[type
     evaluate = commands.add_parser(
         "eval", help="run the paper's evaluation protocols on simulated worlds"
     )
-    protocols = evaluate.add_subparsers(dest="protocol", required=True)
+    protocols = evaluate.add_subparsers(
+        dest="protocol", required=True, metavar="PROTOCOL", help="the protocol to run"
+    )
     for protocol, help_text in (
         (
             "dynamic",

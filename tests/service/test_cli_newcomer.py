@@ -196,19 +196,13 @@ def test_a_closed_stdout_ends_quietly_with_141(tmp_path: Path, closed_pipe: int)
     assert (helped.returncode, helped.stderr) == (0, "")  # argparse itself ignores the error
 
 
-# A subcommand group of evaluation/ (outside the service's CLI) without help of its own; each of
-# its subcommands and options has help, which the walk checks.
-GROUPS_WITHOUT_HELP = {"pbdag eval"}
-
-
 def every_argument(
     parser: argparse.ArgumentParser, path: str = "pbdag"
 ) -> Iterator[tuple[str, argparse.Action]]:
     """(command path, action) of every option, positional and subcommand group in the tree."""
     for action in parser._actions:
         if isinstance(action, argparse._SubParsersAction):
-            if path not in GROUPS_WITHOUT_HELP:
-                yield path, action
+            yield path, action
             for name, sub in action.choices.items():
                 yield from every_argument(sub, f"{path} {name}")
         elif not isinstance(action, argparse._HelpAction):
