@@ -90,9 +90,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--method", default=OURS, help=f"the method compared (default: {OURS})")
     parser.add_argument("--out", type=Path, default=None, help="also write the table here")
     args = parser.parse_args(argv)
-    runs = [
-        json.loads(path.read_text(encoding="utf-8"))["runs"] for path in (args.before, args.after)
-    ]
+    runs = []
+    for path in (args.before, args.after):
+        try:
+            runs.append(json.loads(path.read_text(encoding="utf-8"))["runs"])
+        except (OSError, ValueError, KeyError, TypeError) as error:
+            reason = f"no {error} key" if isinstance(error, KeyError) else str(error)
+            message = f"compare: {path}: not a results.json of `pbdag eval` ({reason})"
+            raise SystemExit(message) from None
     pairs = paired_runs(runs[0], runs[1], args.method)
     if not pairs:
         raise SystemExit(f"no run of {args.method!r} on the same world and seed in both files")

@@ -51,3 +51,12 @@ def test_the_command_names_a_method_with_no_paired_runs(tmp_path: Path) -> None:
     assert "| IDF1↑ | .600" in out.read_text(encoding="utf-8")
     with pytest.raises(SystemExit, match="no run of 'nobody'"):
         main([*paths, "--method", "nobody"])
+
+
+def test_a_file_that_is_not_a_results_json_is_one_line_naming_it(tmp_path: Path) -> None:
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({"worlds": 3}), encoding="utf-8")
+    with pytest.raises(SystemExit, match=r"other\.json: not a results\.json .*no 'runs' key"):
+        main([str(other), str(other)])
+    with pytest.raises(SystemExit, match=r"missing\.json: not a results\.json"):
+        main([str(tmp_path / "missing.json"), str(other)])
