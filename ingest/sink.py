@@ -49,7 +49,12 @@ _T = TypeVar("_T")
 def _readable(error: ApiError, action: str) -> SinkError:
     """A refused request as one line: what was asked, the status, the detail and the field."""
     where = f" (field {error.field})" if error.field else ""
-    return SinkError(f"{action}: HTTP {error.status}: {error.detail}{where}")
+    hint = ""
+    if error.status == 409 and action.startswith("post batch"):
+        # The same batch ids with other content: a re-ingest with other options, or another
+        # recording under the same name.
+        hint = "; to post it anew, give other batch ids (--batch-prefix) or another --scene"
+    return SinkError(f"{action}: HTTP {error.status}: {error.detail}{where}{hint}")
 
 
 def _call(

@@ -60,4 +60,8 @@ class BodyTooLarge(AccessProblem):
     """The request body is larger than the service accepts."""
 
     def __init__(self, max_bytes: int) -> None:
-        super().__init__(f"request body exceeds the limit of {max_bytes} bytes", "body")
+        super().__init__(
+            f"request body exceeds the limit of {max_bytes} bytes (PBDAG_MAX_BODY_BYTES; a "
+            "batch of many frames can be posted as several batches)",
+            "body",
+        )

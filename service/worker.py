@@ -72,6 +72,11 @@ def short_error(error: BaseException) -> tuple[str, bool]:
     return message[:MAX_ERROR_CHARS], False
 
 
+def expected_rejection(error: BaseException) -> bool:
+    """Whether a failure is the batch's own (invalid, or refused by the memory), not a bug."""
+    return isinstance(error, pydantic.ValidationError | PbdagError)
+
+
 @dataclasses.dataclass(frozen=True)
 class WorkerHealth:
     """Whether the worker can record what it does; when not, why and since when."""
@@ -202,7 +207,10 @@ class Worker:
             claim.scene_id,
             claim.attempts,
             message,
-            exc_info=not transient or logger.isEnabledFor(logging.DEBUG),
+            # A rejection (invalid input, a refused command) is the batch's, not a bug: its one
+            # line says it all. The traceback is for the unexpected, or when debugging.
+            exc_info=not (transient or expected_rejection(error))
+            or logger.isEnabledFor(logging.DEBUG),
         )
         try:
             self._record(claim, message, transient)

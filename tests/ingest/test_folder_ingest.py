@@ -74,6 +74,7 @@ def test_new_content_under_old_batch_ids_is_refused_with_the_reason(
     error = capsys.readouterr().err
     assert "post batch conflict-000000: HTTP 409" in error
     assert "already posted with different content" in error
+    assert "--batch-prefix" in error  # what to do about it
 
 
 def test_a_full_scene_queue_is_waited_out(

@@ -232,6 +232,7 @@ def test_body_over_the_declared_limit_is_413_before_the_app_reads_it(
     problem = problem_in(response, 413)
     assert problem["type"] == "/problems/payload-too-large"
     assert str(MAX_BODY_BYTES) in problem["detail"]
+    assert "PBDAG_MAX_BODY_BYTES" in problem["detail"]  # the limit's name, as every other one
     assert app_and_calls[1] == []
 
 

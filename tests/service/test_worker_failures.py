@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from typing import Any
@@ -10,6 +11,7 @@ import pytest
 import sqlalchemy as sa
 from fastapi.testclient import TestClient
 
+from core.errors import StateConflict
 from core.events import Event
 from core.observation import Batch
 from core.state import SceneState
@@ -238,3 +240,32 @@ def test_an_unreadable_event_is_a_409_and_repair_rebuilds_the_scene(
     ]
     assert rebuild_scene(container.log, new).identical
     assert repair_scene(container, new).healthy
+
+
+@pytest.mark.parametrize(
+    ("failure", "traceback"),
+    [
+        (StateConflict("the pose lies outside the scene's map", "frames[0].pose"), False),
+        (ZeroDivisionError("a bug"), True),
+    ],
+)
+def test_a_rejected_batch_is_one_log_line_and_a_bug_keeps_its_traceback(
+    client: TestClient,
+    container: Container,
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+    failure: Exception,
+    traceback: bool,
+) -> None:
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0")
+
+    def decide(state: SceneState, batch: Batch) -> list[Event]:
+        raise failure
+
+    monkeypatch.setattr("service.worker.decide", decide)
+    with caplog.at_level(logging.INFO, logger="pbdag.worker"):
+        Worker(container).drain()
+    assert status(client, scene_id, "b0")["status"] == "dead"
+    (record,) = [r for r in caplog.records if "failed (attempt 1)" in r.getMessage()]
+    assert bool(record.exc_info) is traceback
