@@ -239,13 +239,22 @@ def _serve(args: argparse.Namespace) -> int:
         f"pbdag: raw batches in {blob_location(container.blobs)} "
         f"(PBDAG_BLOB_BACKEND={settings.blob_backend})"
     )
-    print(
-        f"pbdag: API on http://{settings.host}:{settings.port} (docs at /docs, metrics at /metrics)",
-        flush=True,
-    )
+    print(f"pbdag: API on http://{settings.host}:{settings.port} ({pages(settings)})", flush=True)
     print(f"pbdag: allowed Host names {', '.join(settings.allowed_hosts)} (PBDAG_ALLOWED_HOSTS)")
     print(access_summary(container.engine, settings.allow_anonymous_local), flush=True)
     return _run_server(create_app(container, run_worker=settings.run_worker), settings, listener)
+
+
+def pages(settings: Settings) -> str:
+    """Where the docs and metrics are, and whether a browser may open the docs (it sends no
+    token: only anonymous local access lets it in)."""
+    if settings.allow_anonymous_local:
+        return "docs at /docs, metrics at /metrics"
+    return (
+        "docs at /docs with a read token, which a browser does not send: "
+        "PBDAG_ALLOW_ANONYMOUS_LOCAL=true opens them locally, or read api_schema/openapi.json; "
+        "metrics at /metrics"
+    )
 
 
 def bound_socket(host: str, port: int) -> socket.socket:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from service.cli import build_parser, main
+from service.cli import build_parser, main, pages
 from service.settings import Settings
 
 REPO = Path(__file__).resolve().parents[2]
@@ -246,3 +246,9 @@ def test_serve_on_a_busy_port_fails_before_announcing_the_api(tmp_path: Path) ->
         f"pbdag serve: cannot listen on 127.0.0.1:{port}: Address already in use; choose "
         "another with --port or PBDAG_PORT"
     )
+
+
+def test_the_banner_says_whether_a_browser_may_open_the_docs() -> None:
+    locked, open_locally = Settings(), Settings(allow_anonymous_local=True)
+    assert "PBDAG_ALLOW_ANONYMOUS_LOCAL=true" in pages(locked)
+    assert pages(open_locally) == "docs at /docs, metrics at /metrics"
