@@ -194,8 +194,16 @@ class Explanation(BaseModel):
     track_id: str
     state: str
     summary: str = Field(description="One plain sentence.")
-    events: list[EventOut]
+    visible_misses: list[VisibleMiss] = Field(
+        description="The visibility-admissible misses since the track's last sighting, oldest "
+        "first: their frames and p_exist after each (for a removal, those behind it)."
+    )
     removal: Removal | None
+    events: list[EventOut] | None = Field(
+        None,
+        description="Every event of the track, oldest first, with `?events=true`; null otherwise "
+        "(each sighting carries its appearance sum, tens of KB for a track seen often).",
+    )
 
 
 class WorkerStatus(BaseModel):

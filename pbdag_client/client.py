@@ -175,9 +175,9 @@ class _Routes:
         return _Call("GET", path, _model(TrackBelief), _query(as_of=as_of))
 
     @staticmethod
-    def explain(scene_id: str, track_id: str) -> _Call[Explanation]:
+    def explain(scene_id: str, track_id: str, events: bool) -> _Call[Explanation]:
         path = f"{_scene(scene_id)}/tracks/{_segment(track_id)}/explain"
-        return _Call("GET", path, _model(Explanation))
+        return _Call("GET", path, _model(Explanation), _query(events="true" if events else None))
 
     @staticmethod
     def verifications(
@@ -481,9 +481,10 @@ class Client:
         """`GET .../tracks/{track_id}`: the full belief of one track at `as_of`."""
         return self._send(_Routes.track(scene_id, track_id, as_of))
 
-    def explain(self, scene_id: str, track_id: str) -> Explanation:
-        """`GET .../tracks/{track_id}/explain`: why the track is in its state, from the log."""
-        return self._send(_Routes.explain(scene_id, track_id))
+    def explain(self, scene_id: str, track_id: str, *, events: bool = False) -> Explanation:
+        """`GET .../tracks/{track_id}/explain`: why the track is in its state, from the log (its
+        events too with `events`)."""
+        return self._send(_Routes.explain(scene_id, track_id, events))
 
     # --- verification, baselines, inspections, plan --------------------------------------------
 
@@ -710,9 +711,9 @@ class AsyncClient:
         """`GET .../tracks/{track_id}`."""
         return await self._send(_Routes.track(scene_id, track_id, as_of))
 
-    async def explain(self, scene_id: str, track_id: str) -> Explanation:
+    async def explain(self, scene_id: str, track_id: str, *, events: bool = False) -> Explanation:
         """`GET .../tracks/{track_id}/explain`."""
-        return await self._send(_Routes.explain(scene_id, track_id))
+        return await self._send(_Routes.explain(scene_id, track_id, events))
 
     async def verifications(
         self, scene_id: str, *, status: Literal["pending", "all"] = "pending"

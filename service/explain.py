@@ -12,8 +12,11 @@ from service.store.event_log import StoredEvent
 from service.wire import event_out
 
 
-def explain(track_id: str, stored: Sequence[StoredEvent]) -> Explanation:
-    """The track's history, and for a removal the visible misses that led to it."""
+def explain(
+    track_id: str, stored: Sequence[StoredEvent], *, with_events: bool = False
+) -> Explanation:
+    """The sentence and the misses since the last sighting (for a removal, those that led to
+    it); the track's events too `with_events`."""
     events = [(row.seq, row.to_core()) for row in stored]
     last = events[-1][1]
     state = last.state or "unknown"
@@ -37,8 +40,9 @@ def explain(track_id: str, stored: Sequence[StoredEvent]) -> Explanation:
         track_id=track_id,
         state=state,
         summary=summary,
-        events=[event_out(row) for row in stored],
+        visible_misses=_misses_before(events, len(events)),
         removal=removal,
+        events=[event_out(row) for row in stored] if with_events else None,
     )
 
 
@@ -60,6 +64,19 @@ def _removal(events: Sequence[tuple[int, Event]]) -> Removal | None:
     )
     if index is None:
         return None
+    seq, removed = events[index]
+    assert isinstance(removed, TrackRemoved)
+    return Removal(
+        seq=seq,
+        frame_id=removed.frame_id,
+        p_exist=removed.p_exist,
+        visible_misses=_misses_before(events, index),
+    )
+
+
+def _misses_before(events: Sequence[tuple[int, Event]], index: int) -> list[VisibleMiss]:
+    """The visible misses among events[:index] since the last positive observation, oldest
+    first."""
     misses: list[VisibleMiss] = []
     for seq, event in reversed(events[:index]):
         if isinstance(event, Sighting):
@@ -73,11 +90,4 @@ def _removal(events: Sequence[tuple[int, Event]]) -> Removal | None:
                     p_exist_after=event.p_exist,
                 )
             )
-    seq, removed = events[index]
-    assert isinstance(removed, TrackRemoved)
-    return Removal(
-        seq=seq,
-        frame_id=removed.frame_id,
-        p_exist=removed.p_exist,
-        visible_misses=list(reversed(misses)),
-    )
+    return list(reversed(misses))

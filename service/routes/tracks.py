@@ -45,9 +45,17 @@ def get_track(
 
 
 @router.get("/{track_id}/explain", response_model=Explanation)
-def explain_track(scene: SceneDep, track_id: TrackId, container: ContainerDep) -> Explanation:
-    """Why the track is in its state (for a removal: the visible misses behind it), from the log."""
-    events = container.log.read(scene.id, track_id=track_id)
-    if not events:
+def explain_track(
+    scene: SceneDep,
+    track_id: TrackId,
+    container: ContainerDep,
+    events: Annotated[
+        bool, Query(description="Also every event of the track (large for a track seen often).")
+    ] = False,
+) -> Explanation:
+    """Why the track is in its state, from the log: one sentence and the visible misses since
+    its last sighting (for a removal, those behind it); `events=true` adds its events."""
+    stored = container.log.read(scene.id, track_id=track_id)
+    if not stored:
         raise NotFound("track", track_id, "track_id")
-    return explain(track_id, events)
+    return explain(track_id, stored, with_events=events)

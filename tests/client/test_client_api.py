@@ -54,9 +54,10 @@ def test_posting_waiting_and_reading_the_memory(service: Service, filled: Filled
         before = client.track(filled.scene_id, fixture.id, as_of=last.first_seq)
         assert before.seq == last.first_seq
 
-        explanation = client.explain(filled.scene_id, fixture.id)
+        explanation = client.explain(filled.scene_id, fixture.id, events=True)
         assert explanation.track_id == fixture.id and explanation.summary
-        assert all(e.track_id == fixture.id for e in explanation.events)
+        assert explanation.events and all(e.track_id == fixture.id for e in explanation.events)
+        assert client.explain(filled.scene_id, fixture.id).events is None  # only when asked
 
         occupancy = client.occupancy(filled.scene_id)
         assert occupancy.seq == scene.head_seq and occupancy.counts["free"] > 0

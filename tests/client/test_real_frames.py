@@ -103,7 +103,7 @@ def test_twenty_real_frames_through_the_client(
         assert labels == ["book", "mug"], labels
         for node in graph.nodes:
             assert node.state == "confirmed" and node.kind == "object"
-            explanation = client.explain(scene.id, node.id)
+            explanation = client.explain(scene.id, node.id, events=True)
             assert explanation.events and explanation.track_id == node.id
         # The mug sits where the first frame saw it: its center is within its cube.
         camera = read_intrinsics(real_kitchen)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from typing import Any
 
@@ -81,6 +82,17 @@ def test_taken_away_in_view_is_removed_and_explained(api: Api) -> None:
     assert len(explanation["removal"]["visible_misses"]) >= 3
     assert all(miss["samples_passed"] >= 2 for miss in explanation["removal"]["visible_misses"])
     assert "removed" in explanation["summary"]
+    # The answer is the sentence and the evidence; the events (each sighting with its
+    # appearance sum) only when asked for.
+    assert explanation["events"] is None and len(json.dumps(explanation)) < 4000
+    assert explanation["visible_misses"] == explanation["removal"]["visible_misses"]
+    full = client.get(
+        f"/v1/scenes/{scene_id}/tracks/{track_id}/explain", params={"events": "true"}
+    ).json()
+    assert {e["type"] for e in full["events"]} >= {"add", "update", "remove"}
+    assert {key: value for key, value in full.items() if key != "events"} == {
+        key: value for key, value in explanation.items() if key != "events"
+    }
     # time travel: before the removal the mug is still in the graph
     old = mug_node(client, scene_id, as_of=seq_before_removal)
     assert old is not None and old["id"] == track_id

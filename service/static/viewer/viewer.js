@@ -429,7 +429,7 @@ async function showTrack(trackId, ticket = view.renderTicket) {
     el("h3", {}, "Explanation"),
     el("p", { id: "explanation", className: "summary", dataset: { state: explanation.state } }, explanation.summary),
     misses,
-    el("p", { className: "hint" }, `${explanation.events.length} events in its history`),
+    el("p", { className: "hint" }, `${explanation.visible_misses.length} visible misses since it was last seen`),
   );
 }
 
