@@ -16,7 +16,7 @@ import httpx
 
 from api_schema.requests import BatchIn
 from api_schema.responses import BatchStatus
-from pbdag_client import ApiError, Client, RateLimited, ServerError
+from pbdag_client import ApiError, Client, RateLimited, ServerError, scenes_called
 from pbdag_client.errors import retry_after_seconds
 from pbdag_errors import PbdagError
 
@@ -83,11 +83,7 @@ def _call(
 
 def find_or_create_scene(client: Client, scene: str) -> tuple[str, bool]:
     """(scene id, created): the scene whose id or name is `scene`, else a new one named so."""
-    scenes = _call(client, "list scenes", client.scenes)
-    by_id = [entry for entry in scenes if entry.id == scene]
-    if by_id:
-        return by_id[0].id, False
-    named = [entry for entry in scenes if entry.name == scene]
+    named = scenes_called(_call(client, "list scenes", client.scenes), scene)
     if len(named) > 1:
         ids = ", ".join(entry.id for entry in named)
         raise SinkError(

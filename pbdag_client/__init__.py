@@ -8,7 +8,7 @@ Requests and answers are the `api_schema` models; error answers raise the typed 
 wire's png16 depth and COCO RLE. It needs api_schema, pbdag_errors, httpx, numpy and pillow only.
 """
 
-from pbdag_client.client import DEFAULT_TIMEOUT_S, AsyncClient, Client, Submitted
+from pbdag_client.client import DEFAULT_TIMEOUT_S, AsyncClient, Client, Submitted, scenes_called
 from pbdag_client.encoding import (
     build_batch,
     build_frame,
@@ -67,4 +67,5 @@ __all__ = [
     "encode_mask",
     "rle_runs",
     "rle_string",
+    "scenes_called",
 ]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import asyncio
 import time
-from collections.abc import AsyncIterator, Callable, Iterator, Mapping
+from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Generic, Literal, TypeVar
 from urllib.parse import quote
@@ -103,6 +103,13 @@ def _scene(scene_id: str) -> str:
 def _query(**values: str | int | float | None) -> Query:
     """Query parameters, leaving out those not given."""
     return {name: value for name, value in values.items() if value is not None}
+
+
+def scenes_called(scenes: Sequence[Scene], name_or_id: str) -> list[Scene]:
+    """The scene whose id is `name_or_id`, else every scene named so, oldest first (what a
+    command line's `--scene NAME_OR_ID` means)."""
+    by_id = [scene for scene in scenes if scene.id == name_or_id]
+    return by_id or [scene for scene in scenes if scene.name == name_or_id]
 
 
 class _Routes:

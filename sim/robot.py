@@ -18,7 +18,7 @@ import httpx
 from tqdm import tqdm
 
 from api_schema import BatchIn, BatchStatus
-from pbdag_client import Client
+from pbdag_client import Client, scenes_called
 from sim import DEMO_SCENARIO
 from sim.scenario import load_scenario
 from sim.stream import iter_frames, iter_wire_batches
@@ -54,6 +54,17 @@ def create_scene(client: Client, scene_name: str) -> str:
     return scene.id
 
 
+def scene_for(client: Client, scene: str) -> str:
+    """The id of the scene whose id or name is `scene`, created (named so) when none is."""
+    called = scenes_called(
+        _with_retries(client.scenes, retry_on=(httpx.ConnectError, httpx.ConnectTimeout)), scene
+    )
+    if len(called) > 1:
+        ids = ", ".join(entry.id for entry in called)
+        raise ValueError(f"{len(called)} scenes are named {scene!r} ({ids}); pass one's id")
+    return called[0].id if called else create_scene(client, scene)
+
+
 def post_batch(client: Client, scene_id: str, batch: BatchIn) -> BatchStatus:
     """POST one batch; any transport error is retried since batch_id makes the call idempotent."""
     return _with_retries(
@@ -73,8 +84,10 @@ def run_robot(
     progress: bool = True,
     client: Client | None = None,
     token: str | None = None,
+    scene: str | None = None,
 ) -> str:
-    """Create a scene, stream the scenario into it batch by batch, and return the scene id.
+    """Create a scene named `scene_name` (or, given `scene`, the scene of that id or name,
+    created when none is), stream the scenario into it batch by batch, and return its id.
 
     `frames` shortens (or stretches) the scenario with its story intact (`load_scenario`).
     Without a `client`, one on `base_url` (with `token`) is opened and closed here.
@@ -85,7 +98,7 @@ def run_robot(
     own_client = client is None
     http = client if client is not None else Client(base_url, token, timeout=30.0)
     try:
-        scene_id = create_scene(http, scene_name)
+        scene_id = create_scene(http, scene_name) if scene is None else scene_for(http, scene)
         n_batches = -(-scenario.frames // frames_per_batch)
         batches = iter_wire_batches(scenario, seed, iter_frames(scenario, seed), frames_per_batch)
         progress_bar = tqdm(
@@ -119,7 +132,12 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--frames-per-batch", type=int, default=2)
     parser.add_argument("--seed", type=int, default=7)
     parser.add_argument("--pace", type=float, default=0.0, help="seconds to wait between batches")
-    parser.add_argument("--name", default="sim-demo", help="scene name")
+    parser.add_argument("--name", default="sim-demo", help="the new scene's name")
+    parser.add_argument(
+        "--scene",
+        default=None,
+        help="stream into this scene (its id or name; created when none is) instead of a new one",
+    )
     parser.add_argument(
         "--token",
         default=os.environ.get("PBDAG_TOKEN"),
@@ -127,17 +145,26 @@ def main(argv: list[str] | None = None) -> None:
     )
     args = parser.parse_args(argv)
     with Client(args.url, args.token, timeout=30.0) as client:
-        scene_id = run_robot(
-            args.url,
-            scenario_path=args.scenario,
-            scene_name=args.name,
-            frames=args.frames,
-            frames_per_batch=args.frames_per_batch,
-            seed=args.seed,
-            pace_seconds=args.pace,
-            client=client,
-        )
+        try:
+            scene_id = stream_from_arguments(args, client)
+        except ValueError as error:  # two scenes of the name given, a batch size under 1
+            parser.exit(2, f"sim.robot: {error}\n")
     print(scene_id)
+
+
+def stream_from_arguments(args: argparse.Namespace, client: Client) -> str:
+    """`run_robot` with the command line's choices."""
+    return run_robot(
+        args.url,
+        scenario_path=args.scenario,
+        scene_name=args.name,
+        frames=args.frames,
+        frames_per_batch=args.frames_per_batch,
+        seed=args.seed,
+        pace_seconds=args.pace,
+        client=client,
+        scene=args.scene,
+    )
 
 
 if __name__ == "__main__":
