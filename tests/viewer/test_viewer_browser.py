@@ -203,6 +203,20 @@ def head_now(demo: DemoScene) -> int:
     return head
 
 
+def post_more(demo: DemoScene, prefix: str) -> None:
+    """More views of the room as batches, processed: the head moves on."""
+    before = head_now(demo)
+    with httpx.Client(base_url=demo.url, timeout=30.0) as client:
+        bodies = wire_batches(ROOM.without("mug"), TABLE_VIEWS, prefix, ambiguity=AMBIGUOUS_TABLE)
+        for body in bodies:
+            response = client.post(f"/v1/scenes/{demo.scene_id}/batches", json=body)
+            assert response.status_code == 202, response.text
+        deadline = time.monotonic() + 60
+        while head_now(demo) == before:
+            assert time.monotonic() < deadline, "the batches appended nothing in time"
+            time.sleep(0.2)
+
+
 def track_item(page: Page, label: str) -> Locator:
     return page.locator(f'#tracks li[data-label="{label}"]')
 
@@ -303,4 +317,31 @@ def test_docs_render_with_every_other_host_blocked(demo: DemoScene, browsed: Bro
     assert "PBD-AG" in (page.locator(".information-container .title").text_content() or "")
     shot(page, "6-docs-offline")
     assert blocked == []  # nothing even tried to leave the machine
+    assert browsed.errors == []
+
+
+def test_follow_the_head_comes_back_after_scrubbing(demo: DemoScene, browsed: Browsed) -> None:
+    page = browsed.page
+    page.goto(f"{demo.url}/viewer?scene={demo.scene_id}")
+    head = head_now(demo)
+    shown_at(page, head)
+    follow = page.locator("#follow")
+    assert follow.is_checked()
+    page.locator("#seq").fill(str(demo.last_published))  # scrub back: no longer following
+    shown_at(page, demo.last_published)
+    assert not follow.is_checked()
+    # New events while scrubbed back: the view stays where the user put it.
+    post_more(demo, "f1")
+    newer = head_now(demo)
+    deadline = time.monotonic() + 20  # the page polls the head
+    while page.locator("#seq").get_attribute("max") != str(newer):
+        assert time.monotonic() < deadline, "the page did not see the new head"
+        page.wait_for_timeout(100)
+    assert page.locator("body").get_attribute("data-seq") == str(demo.last_published)
+    follow.check()  # back to the head at once
+    shown_at(page, newer)
+    assert page.locator("#seq").input_value() == str(newer)
+    post_more(demo, "f2")  # and on to the next head by itself
+    shown_at(page, head_now(demo))
+    assert follow.is_checked()
     assert browsed.errors == []

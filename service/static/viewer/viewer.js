@@ -144,8 +144,9 @@ async function pollHead() {
   try {
     const scene = await api(scenePath());
     if (scene.head_seq === view.head) return;
-    const atHead = Number($("seq").value) === view.head;
-    const follow = atHead && $("follow").checked;
+    // Scrubbing back unchecks "follow the head" (the slider's handler); checked, the view
+    // moves to every new head.
+    const follow = $("follow").checked;
     setHead(scene.head_seq, follow);
     if (follow) await showSeq(view.head);
     await loadVerifications();
@@ -157,6 +158,7 @@ async function pollHead() {
 // --- one seq: graph, occupancy, events ------------------------------------------------------
 
 async function showSeq(seq) {
+  if (!view.sceneId) return;  // no scene open (no token yet): nothing to ask for
   const ticket = ++view.renderTicket;
   view.seq = seq;
   $("seq-label").textContent = String(seq);
@@ -492,8 +494,14 @@ function start() {
   $("scene-select").addEventListener("change", (event) => openScene(event.target.value).catch(failed));
   $("seq").addEventListener("input", (event) => {
     $("seq-label").textContent = event.target.value;
+    $("follow").checked = Number(event.target.value) === view.head;
     clearTimeout(sliderTimer);
     sliderTimer = setTimeout(() => showSeq(Number(event.target.value)), 120);
+  });
+  $("follow").addEventListener("change", (event) => {
+    if (!event.target.checked || !view.sceneId) return;
+    setHead(view.head, true);  // back to the newest seq now, then to every new one
+    showSeq(view.head).catch(failed);
   });
   $("show-all").addEventListener("change", () => showSeq(view.seq));
   $("events-earlier").addEventListener("click", () => pageEvents(-1));
