@@ -227,6 +227,8 @@ def test_slider_explanation_and_verdict_in_the_browser(demo: DemoScene, browsed:
     shown_at(page, demo.head)
     assert page.locator("#seq").get_attribute("max") == str(demo.head)
     assert track_item(page, "counter").get_attribute("data-state") == "confirmed"
+    counter = track_item(page, "counter")  # its id beside its label: two desks are told apart
+    assert counter.locator(".track-id").text_content() == f"{counter.get_attribute('data-track')} "
     assert track_item(page, "mug").count() == 0  # removed: not in the published graph
     assert track_item(page, "table").count() == 0  # waits for a verdict
     assert page.locator("#map").get_attribute("data-nodes") == "1"

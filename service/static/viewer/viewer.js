@@ -199,6 +199,7 @@ function listTracks() {
           onclick: () => selectTrack(node.id),
         },
         `${node.label} `,
+        el("span", { className: "track-id" }, `${node.id} `),  // five desks are five ids
         el("span", { className: `state state-${node.state}` }, `${node.kind} ${node.state} p=${fixed(node.p_exist)}`),
         node.parent ? el("span", { className: "state" }, ` on ${labelOf(node.parent)}`) : null,
       ),
