@@ -139,7 +139,9 @@ def test_the_plan_locks_once_and_is_reproduced_from_the_log_at_its_seq(
     assert stored.details["view"] == {k: target["view"][k] for k in ("x", "y", "yaw")}
     assert stored.details["uncertainty_terms"] == target["uncertainty"]["terms"]
     assert stored.details["cost_terms"] == target["view"]["cost_terms"]
-    explained = client.get(f"/v1/scenes/{house}/tracks/{target['fixture_id']}/explain").json()
+    explained = client.get(
+        f"/v1/scenes/{house}/tracks/{target['fixture_id']}/explain", params={"events": "true"}
+    ).json()
     assert "inspection_targeted" in [e["type"] for e in explained["events"]]
     # The plan decided at seq n, reproduced from the log at n: the same target, view and terms.
     query = {**ROBOT, "as_of": decided["seq"]}
