@@ -39,7 +39,7 @@ from core.decide import decide
 from core.events import SceneCreated
 from core.evolve import evolve, fold
 from core.params import Params
-from core.state import SceneState, Track
+from core.state import SceneState
 from evaluation.methods import ABLATION_METHODS, OURS, method_named
 from evaluation.protocols import make_stream
 from sim.stream import SimFrame
@@ -83,11 +83,6 @@ def margin(detections: Sequence[Vector], own: Vector, others: Sequence[Vector]) 
     return float(np.mean(rows @ own - best_other))
 
 
-def _label(track: Track) -> str | None:
-    evidence = track.class_evidence
-    return max(evidence, key=lambda label: evidence[label]) if evidence else None
-
-
 def _others(state: SceneState, case: Case, label: str) -> list[Vector]:
     if case.partner is not None:
         partner = state.tracks.get(case.partner)
@@ -97,7 +92,7 @@ def _others(state: SceneState, case: Case, label: str) -> list[Vector]:
     for track_id, track in state.tracks.items():
         vector = track.embedding()
         skip = track_id == case.own or track.kind != "object"
-        if not skip and vector is not None and _label(track) == label:
+        if not skip and vector is not None and track.class_evidence and track.label == label:
             vectors.append(vector)
     return vectors
 

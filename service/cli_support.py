@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from service.bootstrap import Container
 
 SECRET_FIELDS = ("database_password",)  # never echoed back, not even wrong
-URL_PASSWORD = re.compile(r"(://[^:/@]*:)[^@/]*@")  # user:PASSWORD@ in any URL-like value
+URL_PASSWORD = re.compile(r"(://[^:/@]*:)[^@/]*@")  # user:PASSWORD@ in text that is no URL
 
 
 def env_name(field: str) -> str:
@@ -64,8 +64,15 @@ def settings_epilog() -> str:
 
 
 def redacted(url: str) -> str:
-    """`url` without its password (`user:***@host`); any other text as it is."""
-    return URL_PASSWORD.sub(r"\1***@", url)
+    """`url` without its password (`user:***@host`), as SQLAlchemy renders it; text SQLAlchemy
+    cannot parse as a URL (a malformed setting) with any `user:password@` part masked."""
+    from sqlalchemy import make_url
+    from sqlalchemy.exc import ArgumentError
+
+    try:
+        return make_url(url).render_as_string(hide_password=True)
+    except ArgumentError:
+        return URL_PASSWORD.sub(r"\1***@", url)
 
 
 def shown_value(field: str, value: Any) -> str:

@@ -84,20 +84,24 @@ def insert_rows(
             },
         ).rowcount
         if inserted != count:
-            raise ConcurrencyConflict(f"scene {scene_id!r}: head is not {expected_head}")
+            raise _moved(scene_id, expected_head)
         return
     if dialect == "sqlite":
         # The driver's own statements: SQLAlchemy's compilation and parameter handling cost
         # more than SQLite's commit for a batch of one (`bench.bench_store versus`). Its error
         # handling still applies (exec_driver_sql).
-        result = connection.exec_driver_sql(SQLITE_HEAD_UPDATE, (count, scene_id, expected_head))
-    else:
-        parameters = {"scene_id": scene_id, "expected": expected_head, "count": count}
-        result = connection.execute(HEAD_UPDATE, parameters)
-    if result.rowcount != 1:
-        raise ConcurrencyConflict(f"scene {scene_id!r}: head is not {expected_head}")
-    if dialect == "sqlite":
+        head = (count, scene_id, expected_head)
+        if connection.exec_driver_sql(SQLITE_HEAD_UPDATE, head).rowcount != 1:
+            raise _moved(scene_id, expected_head)
         values = [tuple(row[column] for column in EVENT_COLUMNS) for row in rows]
         connection.exec_driver_sql(SQLITE_INSERT, values)
-    else:
-        connection.execute(events.insert(), rows)
+        return
+    parameters = {"scene_id": scene_id, "expected": expected_head, "count": count}
+    if connection.execute(HEAD_UPDATE, parameters).rowcount != 1:
+        raise _moved(scene_id, expected_head)
+    connection.execute(events.insert(), rows)
+
+
+def _moved(scene_id: str, expected_head: int) -> ConcurrencyConflict:
+    """Somebody else appended first: the head is no longer the one this append read."""
+    return ConcurrencyConflict(f"scene {scene_id!r}: head is not {expected_head}")
