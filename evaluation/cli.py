@@ -384,7 +384,7 @@ def run_active(args: argparse.Namespace) -> int:
 def loadable(given: list[Path] | None, defaults: list[str]) -> list[Path] | None:
     """The scenario files to run. A shipped one that cannot load here (the real sequence it
     reads is not beside this clone) is left out with a note; a given one that cannot load is
-    an error (None)."""
+    an error (None), and so is having none left to run."""
     from sim.scenario import ScenarioError, load_scenario
 
     paths = given or [SCENARIOS_DIR / name for name in defaults]
@@ -399,6 +399,9 @@ def loadable(given: list[Path] | None, defaults: list[str]) -> list[Path] | None
             print(f"pbdag eval: leaving out {path.name}: {error}", file=sys.stderr)
             continue
         kept.append(path)
+    if not kept:
+        print(f"pbdag eval: no shipped scenario loads from {SCENARIOS_DIR}", file=sys.stderr)
+        return None
     return kept
 
 
