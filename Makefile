@@ -3,7 +3,7 @@ PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup demo serve test lint format openapi vendor bench eval results soak fuzz clean
+.PHONY: setup demo serve test lint format openapi vendor bench eval results soak fuzz suite-figures clean
 
 setup: $(VENV)/.installed
 
@@ -60,6 +60,9 @@ soak: setup  ## the long fault runs: 40 SIGKILLs, a PostgreSQL restart, a poison
 	$(BIN)/python -m tests.e2e.fault_run --kills 40 --postgres-restart --poison
 	$(BIN)/python -m tests.e2e.fault_run --kills 40 --poison --blob-backend folder
 	$(BIN)/python -m tests.e2e.fault_run --kills 40 --sqlite
+
+suite-figures: setup  ## run the suite once and rewrite its counts and duration in docs/install.md
+	$(BIN)/python -m tests.suite_figures --write
 
 fuzz: setup  ## schemathesis with 200 examples per operation (make test runs 15)
 	PBDAG_FUZZ_EXAMPLES=200 $(BIN)/pytest tests/service/test_schemathesis.py
