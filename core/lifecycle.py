@@ -333,16 +333,17 @@ def miss_decision(track: Track, miss: Miss, params: Params, removal: bool = True
     """A visible miss: `demote` below p_exist 0.30 (pinned fixtures stay published), `remove`
     at p_exist <= 0.12 after three misses. Without `removal` (an append-only memory) neither."""
     existence = miss.existence
-    decision = TrackDecision(track.track_id, miss.frame_id, track.lifecycle, miss)
     if not removal:
-        return decision
+        return TrackDecision(track.track_id, miss.frame_id, track.lifecycle, miss)
     lifecycle, demote, remove = track.lifecycle, None, None
     p_exist, misses = existence.p_exist, existence.visible_misses
     if not track.pinned and should_demote(lifecycle, p_exist, params.lifecycle):
         lifecycle, demote = "demoted", Demotion(p_exist)
     if should_remove(lifecycle, p_exist, misses, track.pinned, params.lifecycle):
         remove = Removal(p_exist, visible_misses=misses)
-    return replace(decision, demote=demote, remove=remove)
+    return TrackDecision(
+        track.track_id, miss.frame_id, track.lifecycle, miss, demote=demote, remove=remove
+    )
 
 
 def _reidentified_decision(
