@@ -7,7 +7,9 @@ test-artifacts/viewer/; the assertions are on the DOM.
 
 from __future__ import annotations
 
+import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -291,6 +293,8 @@ def test_a_typed_token_is_sent_as_a_bearer_header(demo: DemoScene, browsed: Brow
     page.click("#token-form button")
     # The page forbids eval (CSP), so wait on selectors rather than on evaluated functions.
     expect(page.locator("#status")).to_contain_text("needs a token", timeout=TIMEOUT_MS)
+    expect(page.locator("#token")).to_have_class("needed")  # the field to fill, outlined
+    expect(page.locator("#token")).to_be_focused()
     assert "Bearer pbdag_nosuch_token" in requests
     shot(page, "5-bad-token")
     page.fill("#token", "")
@@ -347,3 +351,43 @@ def test_follow_the_head_comes_back_after_scrubbing(demo: DemoScene, browsed: Br
     shown_at(page, head_now(demo))
     assert follow.is_checked()
     assert browsed.errors == []
+
+
+def overlapping(boxes: list[list[float]]) -> list[tuple[int, int]]:
+    """Pairs of label boxes (x, y, w, h) that cover one another."""
+    return [
+        (i, j)
+        for i, (ax, ay, aw, ah) in enumerate(boxes)
+        for j, (bx, by, bw, bh) in enumerate(boxes)
+        if i < j and ax < bx + bw and bx < ax + aw and ay < by + bh and by < ay + ah
+    ]
+
+
+@pytest.mark.parametrize("viewport", [(1400, 900), (520, 420)])
+def test_labels_never_cover_each_other_and_a_scale_bar_fits(
+    demo: DemoScene, browser: Browser, viewport: tuple[int, int]
+) -> None:
+    context = browser.new_context(viewport={"width": viewport[0], "height": viewport[1]})
+    try:
+        page = context.new_page()
+        page.set_default_timeout(TIMEOUT_MS)
+        page.goto(f"{demo.url}/viewer?scene={demo.scene_id}")
+        shown_at(page, head_now(demo))
+        page.locator("#show-all").check()  # every track, the removed mug among them
+        canvas = page.locator("#map")
+        expect(canvas).not_to_have_attribute("data-nodes", "1")
+        nodes = int(canvas.get_attribute("data-nodes") or 0)
+        boxes = json.loads(canvas.get_attribute("data-label-boxes") or "[]")
+        assert 1 <= len(boxes) <= nodes
+        assert overlapping(boxes) == []
+        metres_text = canvas.get_attribute("data-scale-bar") or ""
+        match = re.fullmatch(r"(\d+) (m|cm)", metres_text)
+        assert match, metres_text
+        metres = int(match.group(1)) / (100 if match.group(2) == "cm" else 1)
+        bar_px = float(canvas.get_attribute("data-scale-bar-px") or 0)
+        px_per_m = float(canvas.get_attribute("data-px-per-m") or 0)
+        assert bar_px == pytest.approx(metres * px_per_m, abs=0.1)
+        assert 48 <= bar_px <= 120  # a 1, 2 or 5 step that fits in 120 pixels
+        shot(page, f"7-labels-{viewport[0]}")
+    finally:
+        context.close()

@@ -59,8 +59,17 @@ function say(text, ok = false) {
 }
 
 function failed(error) {
-  say(error instanceof ApiError && error.status === 401
-    ? "This service needs a token: type one above." : String(error.message || error));
+  const needsToken = error instanceof ApiError && error.status === 401;
+  $("token").classList.toggle("needed", needsToken);
+  if (!needsToken) {
+    say(String(error.message || error));
+    return;
+  }
+  say(token()
+    ? "This service needs a token: the one given was refused; paste another above and press Use."
+    : "This service needs a token: paste a read token above and press Use "
+      + "(make one with: pbdag token create --name viewer --scope read).");
+  $("token").focus();
 }
 
 // --- DOM helpers ---------------------------------------------------------------------------
@@ -322,6 +331,7 @@ function drawMap() {
   const byId = new Map(nodes.map((node) => [node.id, node]));
   context.font = "12px system-ui, sans-serif";
   context.textBaseline = "bottom";
+  const labels = [];
   for (const node of nodes.filter((n) => n.kind === "fixture")) {
     const x = px(node.center[0] - node.extent[0] / 2);
     const y = py(node.center[1] + node.extent[1] / 2);
@@ -334,8 +344,9 @@ function drawMap() {
     context.strokeStyle = node.id === view.selected ? "#f08c00" : "#1c3d5a";
     context.lineWidth = node.id === view.selected ? 3 : 1.5;
     context.strokeRect(x, y, w, h);
-    context.fillStyle = "#1c3d5a";
-    context.fillText(node.label, x + 2, y - 2);
+    // Above the footprint, inside its top edge, or below it.
+    const spots = [[x + 2, y - 2], [x + 2, y + 14], [x + 2, y + h + 14]];
+    labels.push({ node, color: "#1c3d5a", spots });
     view.shapes.push({ id: node.id, kind: "fixture", x, y, w, h });
   }
   for (const node of nodes.filter((n) => n.kind !== "fixture")) {
@@ -361,12 +372,76 @@ function drawMap() {
       context.lineWidth = 3;
       context.stroke();
     }
-    context.fillStyle = "#212529";
-    context.fillText(node.label, x + OBJECT_RADIUS_PX + 2, y - 2);
     const r = OBJECT_RADIUS_PX + 2;
+    // Right of the dot, above or below its centre, else left of it.
+    const spots = [[x + r, y - 2], [x + r, y + 14], [x - r, y - 2, "right"], [x - r, y + 14, "right"]];
+    labels.push({ node, color: "#212529", spots });
     view.shapes.push({ id: node.id, kind: "object", x: x - r, y: y - r, w: 2 * r, h: 2 * r });
   }
+  const boxes = drawLabels(context, labels, width, height);
   canvas.dataset.nodes = String(nodes.length);
+  canvas.dataset.labels = String(boxes.length);
+  canvas.dataset.labelBoxes = JSON.stringify(boxes.map((b) => [b.x, b.y, b.w, b.h]));
+  const bar = drawScaleBar(context, scale, height);
+  canvas.dataset.scaleBar = bar.text;
+  canvas.dataset.scaleBarPx = bar.px.toFixed(1);
+  canvas.dataset.pxPerM = scale.toFixed(3);
+}
+
+const LABEL_HEIGHT_PX = 13;
+const overlaps = (a, b) => a.x < b.x + b.w && b.x < a.x + a.w && a.y < b.y + b.h && b.y < a.y + a.h;
+
+// Labels never cover one another: each takes the first of its spots (x, y of the text's
+// baseline, and its alignment) that is inside the map and clear of the labels already drawn,
+// or is left out (the track list names every track). The selected track's label goes first,
+// then confirmed tracks, fixtures before objects.
+function drawLabels(context, labels, width, height) {
+  const rank = ({ node }) => (node.id === view.selected ? 0 : 1) * 4
+    + (node.state === "confirmed" ? 0 : 2) + (node.kind === "fixture" ? 0 : 1);
+  const boxes = [];
+  for (const label of [...labels].sort((a, b) => rank(a) - rank(b))) {
+    const w = context.measureText(label.node.label).width + 2;
+    for (const [x, y, align = "left"] of label.spots) {
+      const box = { x: align === "right" ? x - w : x, y: y - LABEL_HEIGHT_PX, w, h: LABEL_HEIGHT_PX };
+      const inside = box.x >= 0 && box.y >= 0 && box.x + w <= width && y <= height;
+      if (!inside || boxes.some((other) => overlaps(other, box))) continue;
+      context.fillStyle = label.color;
+      context.fillText(label.node.label, box.x, y);
+      boxes.push(box);
+      break;
+    }
+  }
+  return boxes;
+}
+
+// A scale bar in the bottom-left corner: the longest 1, 2 or 5 times a power of ten metres
+// that fits in 120 pixels.
+function drawScaleBar(context, pxPerM, height) {
+  const maxPx = 120;
+  let metres = 10 ** Math.floor(Math.log10(maxPx / pxPerM));
+  for (const step of [5, 2]) {
+    if (metres * step * pxPerM <= maxPx) {
+      metres *= step;
+      break;
+    }
+  }
+  const px = metres * pxPerM;
+  const text = metres >= 1 ? `${metres} m` : `${Math.round(metres * 100)} cm`;
+  const x = 10;
+  const y = height - 10;
+  context.fillStyle = "rgba(255, 255, 255, 0.8)";
+  context.fillRect(x - 4, y - 20, px + 8, 24);
+  context.strokeStyle = "#212529";
+  context.lineWidth = 2;
+  context.beginPath();
+  context.moveTo(x, y - 6);
+  context.lineTo(x, y);
+  context.lineTo(x + px, y);
+  context.lineTo(x + px, y - 6);
+  context.stroke();
+  context.fillStyle = "#212529";
+  context.fillText(text, x + 2, y - 4);
+  return { text, px };
 }
 
 function trackAt(event) {
