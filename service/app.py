@@ -12,6 +12,7 @@ from starlette.responses import PlainTextResponse
 from api_schema import Health, WorkerStatus
 from service.bootstrap import Container, build_container
 from service.errors import install_problem_handlers
+from service.feed import StreamSlots
 from service.metrics import CONTENT_TYPE_LATEST
 from service.middleware.body_limit import BodySizeLimit
 from service.middleware.content_type_options import ContentTypeOptions
@@ -68,6 +69,7 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     )
     app.state.container = container
     app.state.states = StateReader(container.log)
+    app.state.streams = StreamSlots(container.settings.max_streams)
     install_problem_handlers(app)
     install_pages(app)  # /docs, /viewer, /static (innermost: their headers on their answers)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)

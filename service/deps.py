@@ -8,6 +8,7 @@ from fastapi import Depends, Path, Query, Request
 
 from api_schema.requests import PRINTABLE
 from service.bootstrap import Container
+from service.feed import StreamSlots
 from service.settings import Settings
 from service.states import StateReader
 from service.store.errors import SceneQuarantined
@@ -30,8 +31,15 @@ def get_states(request: Request) -> StateReader:
     return reader
 
 
+def get_streams(request: Request) -> StreamSlots:
+    """The app's event stream slots (this process's open streams)."""
+    slots: StreamSlots = request.app.state.streams
+    return slots
+
+
 ContainerDep = Annotated[Container, Depends(get_container)]
 StatesDep = Annotated[StateReader, Depends(get_states)]
+StreamsDep = Annotated[StreamSlots, Depends(get_streams)]
 SceneId = Annotated[
     str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9._:-]+$", description="Scene id.")
 ]
