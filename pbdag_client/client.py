@@ -48,13 +48,17 @@ from api_schema import (
     VerificationItem,
     VerificationList,
 )
-from pbdag_client.errors import BatchDead, BatchTimeout, RateLimited, problem_error
+from pbdag_client.errors import BatchDead, BatchTimeout, RateLimited, ServerError, problem_error
+from pbdag_client.feed import FeedEnded, Resume, SseDecoder
 
 __all__ = ["DEFAULT_TIMEOUT_S", "AsyncClient", "Client"]
 
 DEFAULT_TIMEOUT_S = 30.0
 EVENTS_PAGE_SIZE = 1000  # the largest page the service serves
 FINISHED = ("done", "dead")
+_SSE = "text/event-stream"
+# What a reconnection may mend: the connection lost, a server restarting or too busy.
+_PASSING = (httpx.TransportError, ServerError, RateLimited)
 
 T = TypeVar("T")
 M = TypeVar("M", bound=BaseModel)
@@ -85,6 +89,10 @@ class Submitted:
 
 def _submitted(response: httpx.Response) -> Submitted:
     return Submitted(BatchStatus.model_validate_json(response.content), response.status_code == 202)
+
+
+def _no_body(_response: httpx.Response) -> None:
+    return None
 
 
 def _model(cls: type[M]) -> Callable[[httpx.Response], M]:
@@ -166,6 +174,13 @@ class _Routes:
     ) -> _Call[EventPage]:
         query = _query(after=after, limit=limit, track_id=track_id, type=type)
         return _Call("GET", f"{_scene(scene_id)}/events", _model(EventPage), query)
+
+    @staticmethod
+    def events_stream(
+        scene_id: str, after: int, track_id: str | None, type: str | None
+    ) -> _Call[None]:
+        query = _query(after=after, track_id=track_id, type=type)
+        return _Call("GET", f"{_scene(scene_id)}/events/stream", _no_body, query, accept=_SSE)
 
     @staticmethod
     def tracks(
@@ -473,6 +488,46 @@ class Client:
                 yield event
             cursor = page.next_after
 
+    def stream_events(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        type: str | None = None,
+        track_id: str | None = None,
+        max_failures: int = 10,
+    ) -> Iterator[EventOut]:
+        """`GET .../events/stream`: every event after `after`, then each new one as it is
+        appended, for as long as the caller iterates. A lost or dropped connection is resumed
+        with Last-Event-ID (every seq once, in order), after a backoff of at most 5 s;
+        `max_failures` attempts in a row that fail raise the last error. Ends when the server
+        ends the stream (the scene deleted, or a quarantined scene's log complete)."""
+        resume = Resume(after=after, max_failures=max_failures)
+        call = _Routes.events_stream(scene_id, after, track_id, type)
+        while True:
+            error: Exception | None = None
+            request = _request(self._http, call)
+            request.headers.update(resume.headers())
+            try:
+                response = self._http.send(request, stream=True)
+                try:
+                    if response.is_error:
+                        response.read()
+                        resume.check(response)
+                    decoder = SseDecoder()
+                    for chunk in response.iter_bytes():
+                        for message in decoder.feed(chunk):
+                            event = resume.accept(message)
+                            if event is not None:
+                                yield event
+                finally:
+                    response.close()
+            except FeedEnded:
+                return
+            except _PASSING as failure:
+                error = failure
+            time.sleep(resume.delay(error))
+
     def tracks(
         self,
         scene_id: str,
@@ -702,6 +757,42 @@ class AsyncClient:
                     return
                 yield event
             cursor = page.next_after
+
+    async def stream_events(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        type: str | None = None,
+        track_id: str | None = None,
+        max_failures: int = 10,
+    ) -> AsyncIterator[EventOut]:
+        """`GET .../events/stream` as an async iterator (see `Client.stream_events`)."""
+        resume = Resume(after=after, max_failures=max_failures)
+        call = _Routes.events_stream(scene_id, after, track_id, type)
+        while True:
+            error: Exception | None = None
+            request = _request(self._http, call)
+            request.headers.update(resume.headers())
+            try:
+                response = await self._http.send(request, stream=True)
+                try:
+                    if response.is_error:
+                        await response.aread()
+                        resume.check(response)
+                    decoder = SseDecoder()
+                    async for chunk in response.aiter_bytes():
+                        for message in decoder.feed(chunk):
+                            event = resume.accept(message)
+                            if event is not None:
+                                yield event
+                finally:
+                    await response.aclose()
+            except FeedEnded:
+                return
+            except _PASSING as failure:
+                error = failure
+            await asyncio.sleep(resume.delay(error))
 
     async def tracks(
         self,
