@@ -49,7 +49,7 @@ from api_schema import (
     VerificationList,
 )
 from pbdag_client.errors import BatchDead, BatchTimeout, RateLimited, ServerError, problem_error
-from pbdag_client.feed import FeedEnded, Resume, SseDecoder
+from pbdag_client.feed import Resume, SseDecoder
 
 __all__ = ["DEFAULT_TIMEOUT_S", "AsyncClient", "Client"]
 
@@ -520,10 +520,10 @@ class Client:
                             event = resume.accept(message)
                             if event is not None:
                                 yield event
+                            elif resume.ended is not None:
+                                return
                 finally:
                     response.close()
-            except FeedEnded:
-                return
             except _PASSING as failure:
                 error = failure
             time.sleep(resume.delay(error))
@@ -786,10 +786,10 @@ class AsyncClient:
                             event = resume.accept(message)
                             if event is not None:
                                 yield event
+                            elif resume.ended is not None:
+                                return
                 finally:
                     await response.aclose()
-            except FeedEnded:
-                return
             except _PASSING as failure:
                 error = failure
             await asyncio.sleep(resume.delay(error))

@@ -20,7 +20,7 @@ import httpx
 from api_schema import EventOut
 from pbdag_client.errors import problem_error
 
-__all__ = ["FeedEnded", "Resume", "SseDecoder", "SseMessage"]
+__all__ = ["Resume", "SseDecoder", "SseMessage"]
 
 MAX_LINE_BYTES = 16 * 1024 * 1024  # a line longer than this is no stream of this service
 FIRST_DELAY_S = 0.1
@@ -94,15 +94,6 @@ class SseDecoder:
         return SseMessage(event, "\n".join(data), self.last_id)
 
 
-class FeedEnded(Exception):
-    """The server ended the stream for good (`end`: the scene was deleted, or its log is
-    complete because it is quarantined); `reason` says why."""
-
-    def __init__(self, reason: str) -> None:
-        super().__init__(reason)
-        self.reason = reason
-
-
 @dataclass
 class Resume:
     """The cursor and the retry policy of one consumer across its connections.
@@ -116,6 +107,7 @@ class Resume:
     max_failures: int = 10
     max_delay_s: float = MAX_DELAY_S
     failures: int = 0
+    ended: str | None = None  # why the server ended the stream for good (`end`)
 
     def headers(self) -> dict[str, str]:
         """The request headers of the next attempt."""
@@ -130,10 +122,12 @@ class Resume:
             raise problem_error(response)
 
     def accept(self, message: SseMessage) -> EventOut | None:
-        """The event a message carries, None for one already seen or not an event; FeedEnded
-        at the end. `dropped` needs nothing: the connection ends and the next one resumes."""
+        """The event a message carries, None for one already seen or not an event. `end` (the
+        scene deleted, or a quarantined scene's log complete) sets `ended`: no reconnection.
+        `dropped` needs nothing: the connection ends and the next one resumes."""
         if message.event == "end":
-            raise FeedEnded(_reason(message.data))
+            self.ended = _reason(message.data)
+            return None
         if message.event in CONTROL:
             return None
         event = EventOut.model_validate_json(message.data)

@@ -151,10 +151,6 @@ class LogCursor:
         return b"".join(chunks), None
 
 
-class Dropped(Exception):
-    """The consumer took nothing within the write timeout."""
-
-
 class EventStreamResponse(Response):
     """The SSE answer of one stream: pulls from its cursor, writes, keeps alive; releases its
     slot however it ends."""
@@ -198,36 +194,42 @@ class EventStreamResponse(Response):
         while True:
             chunk, ended = await anyio.to_thread.run_sync(
                 self.cursor.step, self.timing.max_unsent_bytes
-            )
-            try:
-                if chunk:
-                    await self._write(send, chunk)
-                    last_write = time.monotonic()
-                    continue  # catching up: read on at once
-                if ended is not None:
-                    await self._write(send, reason_message("end", ended, seq=self.cursor.scanned))
-                    await send({"type": "http.response.body", "body": b"", "more_body": False})
-                    return
-                if time.monotonic() - last_write >= self.timing.heartbeat_s:
-                    await self._write(send, HEARTBEAT)
-                    last_write = time.monotonic()
-            except Dropped:
-                notice = reason_message(
-                    "dropped",
-                    "the consumer took nothing for "
-                    f"{self.timing.write_timeout_s:g} s; resume with Last-Event-ID",
-                )
-                with anyio.move_on_after(DROP_NOTICE_SECONDS):
-                    await send({"type": "http.response.body", "body": notice, "more_body": False})
+            )  # `ended` only once every event was read
+            if chunk:
+                message = chunk
+            elif ended is not None:
+                message = reason_message("end", ended, seq=self.cursor.scanned)
+            elif time.monotonic() - last_write >= self.timing.heartbeat_s:
+                message = HEARTBEAT
+            else:
+                await anyio.sleep(self.timing.poll_s)
+                continue
+            if not await self._write(send, message):
+                await self._drop(send)
                 return
-            await anyio.sleep(self.timing.poll_s)
+            last_write = time.monotonic()
+            if ended is not None:
+                await send({"type": "http.response.body", "body": b"", "more_body": False})
+                return
+            if not chunk:
+                await anyio.sleep(self.timing.poll_s)
+            # else catching up: read on at once
 
-    async def _write(self, send: Send, body: bytes) -> None:
-        """One write, given up after the write timeout (Dropped)."""
+    async def _write(self, send: Send, body: bytes) -> bool:
+        """One write; False when the consumer did not take it within the write timeout."""
         with anyio.move_on_after(self.timing.write_timeout_s) as deadline:
             await send({"type": "http.response.body", "body": body, "more_body": True})
-        if deadline.cancelled_caught:
-            raise Dropped
+        return not deadline.cancelled_caught
+
+    async def _drop(self, send: Send) -> None:
+        """The last `dropped` message, if the consumer takes it soon; then the stream ends."""
+        notice = reason_message(
+            "dropped",
+            f"the consumer took nothing for {self.timing.write_timeout_s:g} s; "
+            "resume with Last-Event-ID",
+        )
+        with anyio.move_on_after(DROP_NOTICE_SECONDS):
+            await send({"type": "http.response.body", "body": notice, "more_body": False})
 
 
 async def _until_disconnect(receive: Receive, scope: anyio.CancelScope) -> None:

@@ -69,6 +69,8 @@ def call(case: OpenApiCase, checks: list[Any]) -> None:
     if case.path_parameters and "scene_id" in case.path_parameters:
         case.path_parameters["scene_id"] = SCENE.id
     case.call_and_validate(headers={"Authorization": f"Bearer {TOKEN}"}, checks=checks)
+
+
 # The live feed never ends by itself, and the in-process client reads a whole answer: it is
 # served by uvicorn in tests/service/test_event_stream.py (every parameter's 422 included).
 STREAMED = ["/v1/scenes/{scene_id}/events/stream"]
