@@ -48,8 +48,8 @@ from api_schema import (
     VerificationItem,
     VerificationList,
 )
-from pbdag_client.errors import BatchDead, BatchTimeout, RateLimited, ServerError, problem_error
-from pbdag_client.feed import Resume, SseDecoder
+from pbdag_client.errors import BatchDead, BatchTimeout, RateLimited, problem_error
+from pbdag_client.feed import Resume, follow, follow_async
 
 __all__ = ["DEFAULT_TIMEOUT_S", "AsyncClient", "Client"]
 
@@ -57,8 +57,6 @@ DEFAULT_TIMEOUT_S = 30.0
 EVENTS_PAGE_SIZE = 1000  # the largest page the service serves
 FINISHED = ("done", "dead")
 _SSE = "text/event-stream"
-# What a reconnection may mend: the connection lost, a server restarting or too busy.
-_PASSING = (httpx.TransportError, ServerError, RateLimited)
 
 T = TypeVar("T")
 M = TypeVar("M", bound=BaseModel)
@@ -502,31 +500,9 @@ class Client:
         with Last-Event-ID (every seq once, in order), after a backoff of at most 5 s;
         `max_failures` attempts in a row that fail raise the last error. Ends when the server
         ends the stream (the scene deleted, or a quarantined scene's log complete)."""
-        resume = Resume(after=after, max_failures=max_failures)
         call = _Routes.events_stream(scene_id, after, track_id, type)
-        while True:
-            error: Exception | None = None
-            request = _request(self._http, call)
-            request.headers.update(resume.headers())
-            try:
-                response = self._http.send(request, stream=True)
-                try:
-                    if response.is_error:
-                        response.read()
-                        resume.check(response)
-                    decoder = SseDecoder()
-                    for chunk in response.iter_bytes():
-                        for message in decoder.feed(chunk):
-                            event = resume.accept(message)
-                            if event is not None:
-                                yield event
-                            elif resume.ended is not None:
-                                return
-                finally:
-                    response.close()
-            except _PASSING as failure:
-                error = failure
-            time.sleep(resume.delay(error))
+        resume = Resume(after=after, max_failures=max_failures)
+        return follow(self._http, lambda: _request(self._http, call), resume)
 
     def tracks(
         self,
@@ -758,7 +734,7 @@ class AsyncClient:
                 yield event
             cursor = page.next_after
 
-    async def stream_events(
+    def stream_events(
         self,
         scene_id: str,
         *,
@@ -768,31 +744,9 @@ class AsyncClient:
         max_failures: int = 10,
     ) -> AsyncIterator[EventOut]:
         """`GET .../events/stream` as an async iterator (see `Client.stream_events`)."""
-        resume = Resume(after=after, max_failures=max_failures)
         call = _Routes.events_stream(scene_id, after, track_id, type)
-        while True:
-            error: Exception | None = None
-            request = _request(self._http, call)
-            request.headers.update(resume.headers())
-            try:
-                response = await self._http.send(request, stream=True)
-                try:
-                    if response.is_error:
-                        await response.aread()
-                        resume.check(response)
-                    decoder = SseDecoder()
-                    async for chunk in response.aiter_bytes():
-                        for message in decoder.feed(chunk):
-                            event = resume.accept(message)
-                            if event is not None:
-                                yield event
-                            elif resume.ended is not None:
-                                return
-                finally:
-                    await response.aclose()
-            except _PASSING as failure:
-                error = failure
-            await asyncio.sleep(resume.delay(error))
+        resume = Resume(after=after, max_failures=max_failures)
+        return follow_async(self._http, lambda: _request(self._http, call), resume)
 
     async def tracks(
         self,

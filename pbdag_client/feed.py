@@ -11,21 +11,30 @@ between attempts.
 
 from __future__ import annotations
 
+import asyncio
 import json
 import random
+import time
+from collections.abc import AsyncIterator, Callable, Iterator
 from dataclasses import dataclass, field
 
 import httpx
 
 from api_schema import EventOut
-from pbdag_client.errors import problem_error
+from pbdag_client.errors import RateLimited, ServerError, problem_error
 
-__all__ = ["Resume", "SseDecoder", "SseMessage"]
+__all__ = ["Resume", "SseDecoder", "SseMessage", "follow", "follow_async"]
 
 MAX_LINE_BYTES = 16 * 1024 * 1024  # a line longer than this is no stream of this service
 FIRST_DELAY_S = 0.1
 MAX_DELAY_S = 5.0
-CONTROL = ("end", "dropped")  # the stream's own messages (events are named by audit type)
+CONTROL = ("end", "dropped")
+# What a reconnection may mend: the connection lost, a server restarting or too busy.
+PASSING = (
+    httpx.TransportError,
+    ServerError,
+    RateLimited,
+)  # the stream's own messages (events are named by audit type)
 
 
 @dataclass(frozen=True)
@@ -166,3 +175,61 @@ def _retry_after(error: Exception | None) -> float | None:
     if value is None or not value.isdigit():
         return None
     return float(value)
+
+
+def follow(
+    http: httpx.Client, request: Callable[[], httpx.Request], resume: Resume
+) -> Iterator[EventOut]:
+    """The events of the stream `request` builds, over as many connections as it takes."""
+    while True:
+        error: Exception | None = None
+        attempt = request()
+        attempt.headers.update(resume.headers())
+        try:
+            response = http.send(attempt, stream=True)
+            try:
+                if response.is_error:
+                    response.read()
+                    resume.check(response)
+                decoder = SseDecoder()
+                for chunk in response.iter_bytes():
+                    for message in decoder.feed(chunk):
+                        event = resume.accept(message)
+                        if event is not None:
+                            yield event
+                        elif resume.ended is not None:
+                            return
+            finally:
+                response.close()
+        except PASSING as failure:
+            error = failure
+        time.sleep(resume.delay(error))
+
+
+async def follow_async(
+    http: httpx.AsyncClient, request: Callable[[], httpx.Request], resume: Resume
+) -> AsyncIterator[EventOut]:
+    """`follow` for asyncio."""
+    while True:
+        error: Exception | None = None
+        attempt = request()
+        attempt.headers.update(resume.headers())
+        try:
+            response = await http.send(attempt, stream=True)
+            try:
+                if response.is_error:
+                    await response.aread()
+                    resume.check(response)
+                decoder = SseDecoder()
+                async for chunk in response.aiter_bytes():
+                    for message in decoder.feed(chunk):
+                        event = resume.accept(message)
+                        if event is not None:
+                            yield event
+                        elif resume.ended is not None:
+                            return
+            finally:
+                await response.aclose()
+        except PASSING as failure:
+            error = failure
+        await asyncio.sleep(resume.delay(error))

@@ -59,7 +59,9 @@ class FeedReport:
     seconds: float = 0.0
 
 
-def consume(scene_id: str, urls: list[str], start: int, into: Consumer, stop: threading.Event):
+def consume(
+    scene_id: str, urls: list[str], start: int, into: Consumer, stop: threading.Event
+) -> None:
     """Read the feed until it ends, resuming on the next process when one is gone."""
     index = start
     while not stop.is_set():
@@ -116,7 +118,7 @@ def heavy_bodies(count: int) -> list[dict[str, Any]]:
     return templates
 
 
-def post_all(urls: list[str], scene_id: str, count: int, fleet: Fleet, report: FeedReport):
+def post_all(urls: list[str], scene_id: str, count: int, fleet: Fleet, report: FeedReport) -> None:
     """`count` batches round-robin over the APIs (skipping one that is down); SIGKILL and
     restart KILLED at a third and two thirds of the way."""
     templates = heavy_bodies(6)
