@@ -29,6 +29,7 @@ from starlette.responses import Response
 from starlette.types import Message, Receive, Scope, Send
 
 from pbdag_errors import Refused
+from service.middleware.methods import HEAD_KEY
 from service.settings import Settings
 from service.store.errors import SceneNotFound
 from service.store.event_log import EventLog, StoredEvent
@@ -179,6 +180,9 @@ class EventStreamResponse(Response):
                 "headers": self.raw_headers,
             }
             await send(start)
+            if scope.get(HEAD_KEY):  # the headers are the whole answer to a HEAD
+                await send({"type": "http.response.body", "body": b"", "more_body": False})
+                return
             async with anyio.create_task_group() as group:
                 group.start_soon(_until_disconnect, receive, group.cancel_scope)
                 await self._pump(send)

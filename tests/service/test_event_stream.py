@@ -276,3 +276,13 @@ def test_the_client_raises_what_a_retry_cannot_mend(container: Container, url: s
     with Client(url) as client, pytest.raises(InvalidRequest) as refused:
         next(iter(client.stream_events(scene.id, after=-5)))
     assert refused.value.field == "after"
+
+
+def test_a_head_answers_the_headers_and_ends(container: Container, app: FastAPI, url: str) -> None:
+    scene = Scene(container)
+    with httpx.Client(timeout=5) as http:
+        head = http.head(url + stream_path(scene.id))
+        assert head.status_code == 200 and head.content == b""
+        assert head.headers["content-type"].startswith("text/event-stream")
+        assert http.get(f"{url}/v1/scenes/{scene.id}").status_code == 200  # the same connection
+    assert app.state.streams.open == 0
