@@ -33,6 +33,8 @@ from service.routes import (
 )
 from service.security import install_security
 from service.states import StateReader
+from service.store.engine import is_postgres
+from service.store.notifications import Wakeups
 from service.viewer import install_pages
 from service.worker import WorkerThread
 
@@ -49,9 +51,13 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
         app.state.worker = worker
         if worker is not None:
             worker.start()
+        listening = container.settings.stream_listen and is_postgres(container.engine)
+        wakeups = app.state.wakeups = Wakeups(container.engine) if listening else None
         try:
             yield
         finally:
+            if wakeups is not None:
+                wakeups.close()
             if worker is not None:
                 worker.close()
 
@@ -70,6 +76,7 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.state.container = container
     app.state.states = StateReader(container.log)
     app.state.streams = StreamSlots(container.settings.max_streams)
+    app.state.wakeups = None  # set while the lifespan runs, on PostgreSQL
     install_problem_handlers(app)
     install_pages(app)  # /docs, /viewer, /static (innermost: their headers on their answers)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)

@@ -4,7 +4,8 @@ New events are found the one way every API process can find them, whichever proc
 appended them: by reading the log. An idle stream reads the scene's row (its head) every
 `stream_poll_seconds`, and the events after its cursor (`EventLog.read`, `seq > last`, the
 primary key's order) only when the head moved. Nothing is shared between processes but the
-database, so N API processes serve the same feed.
+database, so N API processes serve the same feed. On PostgreSQL a NOTIFY at each append's
+commit wakes the waiting streams early (`service/store/notifications.py`); the poll remains.
 
 The stream is pulled: the log is read only once what was read before has been taken by the
 server (each `send` returns when the server's write buffer has room: uvicorn pauses the
@@ -20,7 +21,7 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
 
 import anyio
@@ -163,10 +164,12 @@ class EventStreamResponse(Response):
         cursor: LogCursor,
         timing: FeedTiming,
         release: Callable[[], None],
+        idle: Callable[[float], Awaitable[None]] = anyio.sleep,
     ) -> None:
         self.cursor = cursor
         self.timing = timing
         self.release = release
+        self.idle = idle  # waits up to its seconds; may return early when the log grew
         self.status_code = 200
         self.background = None
         # No caching, no buffering by a proxy (nginx honours X-Accel-Buffering).
@@ -206,7 +209,7 @@ class EventStreamResponse(Response):
             elif time.monotonic() - last_write >= self.timing.heartbeat_s:
                 message = HEARTBEAT
             else:
-                await anyio.sleep(self.timing.poll_s)
+                await self.idle(self.timing.poll_s)
                 continue
             if not await self._write(send, message):
                 await self._drop(send)
@@ -216,7 +219,7 @@ class EventStreamResponse(Response):
                 await send({"type": "http.response.body", "body": b"", "more_body": False})
                 return
             if not chunk:
-                await anyio.sleep(self.timing.poll_s)
+                await self.idle(self.timing.poll_s)
             # else catching up: read on at once
 
     async def _write(self, send: Send, body: bytes) -> bool:

@@ -156,6 +156,11 @@ class Settings(SecuritySettings):
         description="How often an idle event stream reads the scene's head from the log (new "
         "events may come from a worker in any process).",
     )
+    stream_listen: bool = Field(
+        True,
+        description="On PostgreSQL, wake the event streams by LISTEN/NOTIFY as soon as events are "
+        "committed (one connection per API process); they poll the log all the same.",
+    )
     stream_heartbeat_seconds: float = Field(
         10.0,
         ge=0.05,

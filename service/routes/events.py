@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import functools
 from typing import Annotated, Any
 
+import anyio
 from fastapi import APIRouter, Header, Query
 from starlette.responses import Response
 
 from api_schema import EventOut, EventPage
-from service.deps import MAX_INT, AnySceneDep, ContainerDep, StreamsDep, text_query
+from service.deps import MAX_INT, AnySceneDep, ContainerDep, StreamsDep, WakeupsDep, text_query
 from service.feed import MEDIA_TYPE, EventStreamResponse, FeedTiming, LogCursor
 from service.wire import event_out
 
@@ -56,6 +58,7 @@ def stream_events(
     scene: AnySceneDep,
     container: ContainerDep,
     streams: StreamsDep,
+    wakeups: WakeupsDep,
     after: After = -1,
     track_id: TrackFilter = None,
     type: TypeFilter = None,
@@ -79,5 +82,7 @@ def stream_events(
         track_id=track_id,
         event_type=type,
     )
+    idle = anyio.sleep if wakeups is None else functools.partial(wakeups.wait, scene.id)
     streams.acquire()  # 503 when this process serves PBDAG_MAX_STREAMS already
-    return EventStreamResponse(cursor, FeedTiming.of(container.settings), streams.release)
+    timing = FeedTiming.of(container.settings)
+    return EventStreamResponse(cursor, timing, streams.release, idle)

@@ -20,10 +20,11 @@ from core.events import Event
 from core.params import Params
 from pbdag_client import Client, InvalidRequest
 from service.app import create_app
-from service.bootstrap import Container
+from service.bootstrap import Container, build_container
 from service.settings import Settings
 from service.store.engine import write_transaction
 from service.store.tables import events, scenes, snapshots, tracks
+from tests.conftest import engine_for
 from tests.live_server import served
 from tests.service.minimal_events import added
 
@@ -286,3 +287,28 @@ def test_a_head_answers_the_headers_and_ends(container: Container, app: FastAPI,
         assert head.headers["content-type"].startswith("text/event-stream")
         assert http.get(f"{url}/v1/scenes/{scene.id}").status_code == 200  # the same connection
     assert app.state.streams.open == 0
+
+
+@pytest.mark.postgres
+def test_on_postgres_a_notify_wakes_the_stream_before_its_poll(
+    settings: Settings, tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
+    polling = settings.model_copy(update={"stream_poll_seconds": 4.0})
+    engine = engine_for("postgres", tmp_path, request)
+    container = build_container(polling, engine=engine)
+    try:
+        app = create_app(container)
+        with served(app) as url:
+            scene = Scene(container)
+            with Client(url) as client:
+                stream = client.stream_events(scene.id)
+                assert next(stream).seq == 0  # then the stream waits, up to 4 s
+                writer = scene.append_later(0.3, added("trk-1"))
+                started = time.monotonic()
+                assert next(stream).seq == 1
+                elapsed = time.monotonic() - started
+                stream.close()  # type: ignore[attr-defined]
+            writer.join()
+    finally:
+        engine.dispose()
+    assert 0.3 <= elapsed < 2.0, elapsed  # the append's NOTIFY, not the next poll
