@@ -14,11 +14,13 @@ time. A consumer that takes nothing for `stream_write_timeout_seconds` is droppe
 `dropped` message (best effort: the consumer may never read it), then the stream ends. A
 stream also ends, with an `end` message and its reason, when the scene is deleted, or once a
 quarantined scene's log has been sent (a quarantined scene takes no more events). A client
-that disconnects ends its stream at once (the disconnect is watched beside the writer).
+that disconnects ends its stream at once (the disconnect is watched beside the writer). The
+database unavailable closes the stream without a message: the consumer resumes.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Awaitable, Callable
@@ -32,7 +34,7 @@ from starlette.types import Message, Receive, Scope, Send
 from pbdag_errors import Refused
 from service.middleware.methods import HEAD_KEY
 from service.settings import Settings
-from service.store.errors import SceneNotFound
+from service.store.errors import SceneNotFound, StoreUnavailable
 from service.store.event_log import EventLog, StoredEvent
 from service.wire import event_out
 
@@ -40,6 +42,8 @@ MEDIA_TYPE = "text/event-stream"
 PAGE_ROWS = 500  # events read at once, fewer when their bytes reach the unsent bound
 DROP_NOTICE_SECONDS = 1.0  # how long the last `dropped` message may wait for the consumer
 HEARTBEAT = b": heartbeat\n\n"
+
+logger = logging.getLogger("pbdag.feed")
 
 
 class TooManyStreams(Refused):
@@ -199,9 +203,14 @@ class EventStreamResponse(Response):
         """Send what the log holds after the cursor, then what comes, until the stream ends."""
         last_write = time.monotonic()
         while True:
-            chunk, ended = await anyio.to_thread.run_sync(
-                self.cursor.step, self.timing.max_unsent_bytes
-            )  # `ended` only once every event was read
+            try:
+                chunk, ended = await anyio.to_thread.run_sync(
+                    self.cursor.step, self.timing.max_unsent_bytes
+                )  # `ended` only once every event was read
+            except StoreUnavailable as error:  # the consumer resumes once the database is back
+                logger.warning("event stream of %s closed: %s", self.cursor.scene_id, error)
+                await send({"type": "http.response.body", "body": b"", "more_body": False})
+                return
             if chunk:
                 message = chunk
             elif ended is not None:

@@ -23,6 +23,7 @@ from service.app import create_app
 from service.bootstrap import Container, build_container
 from service.settings import Settings
 from service.store.engine import write_transaction
+from service.store.errors import StoreUnavailable
 from service.store.tables import events, scenes, snapshots, tracks
 from tests.conftest import engine_for
 from tests.live_server import served
@@ -312,3 +313,25 @@ def test_on_postgres_a_notify_wakes_the_stream_before_its_poll(
     finally:
         engine.dispose()
     assert 0.3 <= elapsed < 2.0, elapsed  # the append's NOTIFY, not the next poll
+
+
+def test_the_database_unavailable_closes_the_stream_for_a_resumption(
+    container: Container, app: FastAPI, url: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    scene = Scene(container)
+    lines: list[str] = []
+    with httpx.stream("GET", url + stream_path(scene.id), timeout=10) as response:
+        for line in response.iter_lines():
+            lines.append(line)
+            if line.startswith("data: "):  # event 0 sent: now the database goes away
+
+                def unavailable(*_args: object, **_kwargs: object) -> None:
+                    raise StoreUnavailable("the database", OSError("connection refused"))
+
+                monkeypatch.setattr(container.log, "scene", unavailable)
+    assert lines[:2] == ["id: 0", "event: scene_created"]  # then the answer ended, no message
+    assert lines[-1] == "" and not any(line.startswith("event: end") for line in lines)
+    deadline = time.monotonic() + 2  # the slot is released as the answer ends
+    while app.state.streams.open > 0:
+        assert time.monotonic() < deadline, "the stream kept its slot"
+        time.sleep(0.02)
