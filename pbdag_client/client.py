@@ -49,12 +49,14 @@ from api_schema import (
     VerificationList,
 )
 from pbdag_client.errors import BatchDead, BatchTimeout, RateLimited, problem_error
+from pbdag_client.feed import Resume, follow, follow_async
 
 __all__ = ["DEFAULT_TIMEOUT_S", "AsyncClient", "Client"]
 
 DEFAULT_TIMEOUT_S = 30.0
 EVENTS_PAGE_SIZE = 1000  # the largest page the service serves
 FINISHED = ("done", "dead")
+_SSE = "text/event-stream"
 
 T = TypeVar("T")
 M = TypeVar("M", bound=BaseModel)
@@ -85,6 +87,10 @@ class Submitted:
 
 def _submitted(response: httpx.Response) -> Submitted:
     return Submitted(BatchStatus.model_validate_json(response.content), response.status_code == 202)
+
+
+def _no_body(_response: httpx.Response) -> None:
+    return None
 
 
 def _model(cls: type[M]) -> Callable[[httpx.Response], M]:
@@ -166,6 +172,13 @@ class _Routes:
     ) -> _Call[EventPage]:
         query = _query(after=after, limit=limit, track_id=track_id, type=type)
         return _Call("GET", f"{_scene(scene_id)}/events", _model(EventPage), query)
+
+    @staticmethod
+    def events_stream(
+        scene_id: str, after: int, track_id: str | None, type: str | None
+    ) -> _Call[None]:
+        query = _query(after=after, track_id=track_id, type=type)
+        return _Call("GET", f"{_scene(scene_id)}/events/stream", _no_body, query, accept=_SSE)
 
     @staticmethod
     def tracks(
@@ -473,6 +486,24 @@ class Client:
                 yield event
             cursor = page.next_after
 
+    def stream_events(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        type: str | None = None,
+        track_id: str | None = None,
+        max_failures: int = 10,
+    ) -> Iterator[EventOut]:
+        """`GET .../events/stream`: every event after `after`, then each new one as it is
+        appended, for as long as the caller iterates. A lost or dropped connection is resumed
+        with Last-Event-ID (every seq once, in order), after a backoff of at most 5 s;
+        `max_failures` attempts in a row that fail raise the last error. Ends when the server
+        ends the stream (the scene deleted, or a quarantined scene's log complete)."""
+        call = _Routes.events_stream(scene_id, after, track_id, type)
+        resume = Resume(after=after, max_failures=max_failures)
+        return follow(self._http, lambda: _request(self._http, call), resume)
+
     def tracks(
         self,
         scene_id: str,
@@ -702,6 +733,20 @@ class AsyncClient:
                     return
                 yield event
             cursor = page.next_after
+
+    def stream_events(
+        self,
+        scene_id: str,
+        *,
+        after: int = -1,
+        type: str | None = None,
+        track_id: str | None = None,
+        max_failures: int = 10,
+    ) -> AsyncIterator[EventOut]:
+        """`GET .../events/stream` as an async iterator (see `Client.stream_events`)."""
+        call = _Routes.events_stream(scene_id, after, track_id, type)
+        resume = Resume(after=after, max_failures=max_failures)
+        return follow_async(self._http, lambda: _request(self._http, call), resume)
 
     async def tracks(
         self,

@@ -12,6 +12,7 @@ from starlette.responses import PlainTextResponse
 from api_schema import Health, WorkerStatus
 from service.bootstrap import Container, build_container
 from service.errors import install_problem_handlers
+from service.feed import StreamSlots
 from service.metrics import CONTENT_TYPE_LATEST
 from service.middleware.body_limit import BodySizeLimit
 from service.middleware.content_type_options import ContentTypeOptions
@@ -32,6 +33,8 @@ from service.routes import (
 )
 from service.security import install_security
 from service.states import StateReader
+from service.store.engine import is_postgres
+from service.store.notifications import Wakeups
 from service.viewer import install_pages
 from service.worker import WorkerThread
 
@@ -48,9 +51,13 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
         app.state.worker = worker
         if worker is not None:
             worker.start()
+        listening = container.settings.stream_listen and is_postgres(container.engine)
+        wakeups = app.state.wakeups = Wakeups(container.engine) if listening else None
         try:
             yield
         finally:
+            if wakeups is not None:
+                wakeups.close()
             if worker is not None:
                 worker.close()
 
@@ -68,6 +75,8 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     )
     app.state.container = container
     app.state.states = StateReader(container.log)
+    app.state.streams = StreamSlots(container.settings.max_streams)
+    app.state.wakeups = None  # set while the lifespan runs, on PostgreSQL
     install_problem_handlers(app)
     install_pages(app)  # /docs, /viewer, /static (innermost: their headers on their answers)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)

@@ -8,10 +8,12 @@ from fastapi import Depends, Path, Query, Request
 
 from api_schema.requests import PRINTABLE
 from service.bootstrap import Container
+from service.feed import StreamSlots
 from service.settings import Settings
 from service.states import StateReader
 from service.store.errors import SceneQuarantined
 from service.store.event_log import SceneRecord
+from service.store.notifications import Wakeups
 from service.store.queue_records import Admission
 
 # Largest integer a query or path may carry: the databases store 64-bit signed integers.
@@ -30,8 +32,22 @@ def get_states(request: Request) -> StateReader:
     return reader
 
 
+def get_streams(request: Request) -> StreamSlots:
+    """The app's event stream slots (this process's open streams)."""
+    slots: StreamSlots = request.app.state.streams
+    return slots
+
+
+def get_wakeups(request: Request) -> Wakeups | None:
+    """The app's LISTEN/NOTIFY wake-ups (None but on PostgreSQL, while the app runs)."""
+    wakeups: Wakeups | None = request.app.state.wakeups
+    return wakeups
+
+
 ContainerDep = Annotated[Container, Depends(get_container)]
 StatesDep = Annotated[StateReader, Depends(get_states)]
+StreamsDep = Annotated[StreamSlots, Depends(get_streams)]
+WakeupsDep = Annotated[Wakeups | None, Depends(get_wakeups)]
 SceneId = Annotated[
     str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9._:-]+$", description="Scene id.")
 ]

@@ -40,6 +40,7 @@ from service.access_errors import (
     NotAuthenticated,
     RateLimitExceeded,
 )
+from service.feed import TooManyStreams
 from service.store.errors import (
     BatchConflict,
     ConcurrencyConflict,
@@ -90,6 +91,7 @@ PROBLEMS: dict[type[Exception], Problem] = {
     QueueFull: Problem(429, "Too Many Requests", "/problems/queue-full"),
     QuotaExceeded: Problem(507, "Insufficient Storage", "/problems/quota-exceeded"),
     StoreUnavailable: Problem(503, "Service Unavailable", "/problems/store-unavailable"),
+    TooManyStreams: Problem(503, "Service Unavailable", "/problems/too-many-streams"),
     Failure: INTERNAL,
 }
 # A lost database connection or a full disk may pass: the client is told to retry after this.
@@ -98,7 +100,7 @@ STORE_RETRY_AFTER_SECONDS = 2
 
 def headers_of(error: PbdagError) -> dict[str, str] | None:
     """The response headers HTTP asks for with `error`: a bearer challenge with a 401 or 403
-    (RFC 6750 section 3), Retry-After with a 429."""
+    (RFC 6750 section 3), Retry-After with a 429 or a 503."""
     match error:
         case NotAuthenticated(token_error=None):
             return {"WWW-Authenticate": f"Bearer {REALM}"}
@@ -107,7 +109,11 @@ def headers_of(error: PbdagError) -> dict[str, str] | None:
         case InsufficientScope(needed=needed):
             challenge = f'Bearer {REALM}, error="insufficient_scope", scope="{needed}"'
             return {"WWW-Authenticate": challenge}
-        case RateLimitExceeded(retry_after=seconds) | QueueFull(retry_after=seconds):
+        case (
+            RateLimitExceeded(retry_after=seconds)
+            | QueueFull(retry_after=seconds)
+            | TooManyStreams(retry_after=seconds)
+        ):
             return {"Retry-After": str(seconds)}
         case StoreUnavailable():
             return {"Retry-After": str(STORE_RETRY_AFTER_SECONDS)}

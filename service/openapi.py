@@ -40,6 +40,10 @@ STORAGE = {507: "The scene's raw batches would exceed its quota (PBDAG_MAX_SCENE
 GONE = {410: "The batch's raw body was deleted by `pbdag gc` (PBDAG_RAW_RETENTION)."}
 OPEN = {400: COMMON[400], 500: COMMON[500], 503: COMMON[503]}
 LISTING = {404: "`after` names no scene."}
+STREAM = {
+    503: "The database is unavailable for a moment, or this server already serves "
+    "PBDAG_MAX_STREAMS event streams: retry after Retry-After (or on another server)."
+}
 
 
 def error_statuses(path: str, method: str) -> dict[int, str]:
@@ -57,6 +61,8 @@ def error_statuses(path: str, method: str) -> dict[int, str]:
         statuses |= GONE
     if path == "/v1/scenes" and method == "get":
         statuses |= LISTING
+    if path.endswith("/events/stream"):
+        statuses |= STREAM
     return statuses
 
 

@@ -142,6 +142,46 @@ class Settings(SecuritySettings):
     state_cache_scenes: int = Field(
         64, description="Scene states a worker keeps in memory between batches."
     )
+    # The live change feed (`GET /v1/scenes/{id}/events/stream`).
+    max_streams: int = Field(
+        64,
+        ge=1,
+        le=10_000,
+        description="Event streams one API process keeps open; more are a 503 with Retry-After.",
+    )
+    stream_poll_seconds: float = Field(
+        0.25,
+        ge=0.01,
+        le=60,
+        description="How often an idle event stream reads the scene's head from the log (new "
+        "events may come from a worker in any process).",
+    )
+    stream_listen: bool = Field(
+        True,
+        description="On PostgreSQL, wake the event streams by LISTEN/NOTIFY as soon as events are "
+        "committed (one connection per API process); they poll the log all the same.",
+    )
+    stream_heartbeat_seconds: float = Field(
+        10.0,
+        ge=0.05,
+        le=300,
+        description="An event stream with nothing to send writes a comment line this often, so "
+        "proxies and clients see the connection alive.",
+    )
+    stream_write_timeout_seconds: float = Field(
+        10.0,
+        ge=0.05,
+        le=300,
+        description="A consumer that has not taken a write within this many seconds is dropped "
+        "(a last `dropped` message, then the stream closes).",
+    )
+    stream_max_unsent_bytes: int = Field(
+        1024 * 1024,
+        ge=4096,
+        le=64 * 1024 * 1024,
+        description="Bytes of events an event stream holds for its consumer: the log is read "
+        "only as fast as the consumer takes them, at most this much at a time.",
+    )
 
     @field_validator("database_url")
     @classmethod

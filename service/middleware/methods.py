@@ -4,7 +4,8 @@ HEAD is served here, as the GET of the same URL without its body, rather than by
 each route: one rule then covers every route, the pages and the static files, routes added later
 included, and the OpenAPI document does not list a HEAD twin of every GET. Everything inside
 sees a GET, so a HEAD needs the scope the GET needs (`read`) and answers the GET's status and
-headers, Content-Length included.
+headers, Content-Length included. An answer that never ends by itself (the event stream) reads
+`HEAD_KEY` in the scope to end after its headers.
 
 A route answers 405 with its own methods only, and a path often has several routes
 (`GET /v1/scenes` and `POST /v1/scenes` are two), so the answer's `Allow` is replaced by the
@@ -19,6 +20,7 @@ from fastapi.routing import iter_route_contexts
 from starlette.routing import BaseRoute, Match
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+HEAD_KEY = "pbdag.head"  # in the scope the routes see: the request was a HEAD
 # The order `Allow` lists methods in; others follow alphabetically.
 _ORDER = ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE", "OPTIONS")
 
@@ -55,7 +57,7 @@ class Methods:
             return
         head = scope["method"] == "HEAD"
         # A copy: the server keeps its own scope, and must still see the HEAD to frame the answer.
-        inner = {**scope, "method": "GET"} if head else scope
+        inner = {**scope, "method": "GET", HEAD_KEY: True} if head else scope
         requested = dict(inner)  # as it came: routing writes into the scope it is given
 
         async def send_answer(message: Message) -> None:

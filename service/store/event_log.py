@@ -27,6 +27,7 @@ from service.store.errors import (
     SeqOutOfRange,
     UnreadableEvent,
 )
+from service.store.notifications import notify_appended
 from service.store.snapshot_codec import SNAPSHOT_VERSION, decode_snapshot, encode_snapshot
 from service.store.tables import events, scenes, snapshots
 
@@ -231,6 +232,7 @@ class EventLog:
             for i, event in enumerate(new_events)
         ]  # before any write: a non-finite number stops the append here
         insert_rows(connection, scene_id, expected_head, rows, batch_id, now)
+        notify_appended(connection, scene_id)  # PostgreSQL: wakes the event streams at commit
         return expected_head + 1, expected_head + count
 
     def read(

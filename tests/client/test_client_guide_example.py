@@ -7,6 +7,7 @@ import io
 import re
 from pathlib import Path
 
+from pbdag_client import Client
 from tests.client.conftest import Service
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -14,11 +15,16 @@ CLIENT_GUIDE = ROOT / "docs" / "client.md"
 README = ROOT / "README.md"
 
 
+def python_blocks(page: Path) -> list[str]:
+    """The Python blocks of a page, in order."""
+    return re.findall(r"```python\n(.*?)```", page.read_text(), re.DOTALL)
+
+
 def first_python_block(page: Path) -> str:
     """The first Python block of a page."""
-    found = re.search(r"```python\n(.*?)```", page.read_text(), re.DOTALL)
-    assert found is not None, f"{page.name} has no Python example"
-    return found.group(1)
+    blocks = python_blocks(page)
+    assert blocks, f"{page.name} has no Python example"
+    return blocks[0]
 
 
 def run_example(code: str, url: str, name: str) -> list[str]:
@@ -38,3 +44,13 @@ def test_the_guide_example_posts_a_frame_and_explains_the_track(service: Service
     listed = run_example(first_python_block(README), service.url, "README.md")
     track_id = lines[0].split()[0]
     assert listed == [f"{track_id} mug tentative None"]
+
+
+def test_the_guide_follows_the_log_with_the_feed(service: Service) -> None:
+    run_example(first_python_block(CLIENT_GUIDE), service.url, "docs/client.md")
+    with Client(service.url) as client:  # the scene the example made, and its first add
+        first = next(client.events(client.scenes()[-1].id, type="add"))
+    feed = python_blocks(CLIENT_GUIDE)[1]
+    assert "stream_events" in feed
+    printed = run_example(feed, service.url, "docs/client.md (feed)")
+    assert printed == [f"{first.seq} add {first.track_id}"]

@@ -364,8 +364,8 @@ BASES = {"AccessProblem", "DomainError"}
 
 def test_what_a_client_can_cause_is_a_4xx_and_what_the_server_fails_at_a_500() -> None:
     """The table reads along the two branches: every refusal of the service or the core has its
-    own 4xx (a quota's 507 aside), every failure is the bare 500 (an unavailable store's 503
-    aside)."""
+    own 4xx (a quota's 507 and the 503 of a server at its stream limit aside), every failure is
+    the bare 500 (an unavailable store's 503 aside)."""
     imported_everything(core, codec, service)
     ours = ("core.", "codec.", "service.")
     refusals = {
@@ -376,7 +376,8 @@ def test_what_a_client_can_cause_is_a_4xx_and_what_the_server_fails_at_a_500() -
     assert len(refusals) >= 20, sorted(cls.__name__ for cls in refusals)
     status = {cls.__name__: problem_of(cls.__new__(cls)).status for cls in refusals}
     assert {name: code for name, code in status.items() if not 400 <= code < 500} == {
-        "QuotaExceeded": 507
+        "QuotaExceeded": 507,
+        "TooManyStreams": 503,
     }
     failures = {cls for cls in every_subclass(Failure) if cls.__module__.startswith(ours)}
     assert len(failures) >= 6, sorted(cls.__name__ for cls in failures)

@@ -71,7 +71,12 @@ def call(case: OpenApiCase, checks: list[Any]) -> None:
     case.call_and_validate(headers={"Authorization": f"Bearer {TOKEN}"}, checks=checks)
 
 
-@schema.parametrize()
+# The live feed never ends by itself, and the in-process client reads a whole answer: it is
+# served by uvicorn in tests/service/test_event_stream.py (every parameter's 422 included).
+STREAMED = ["/v1/scenes/{scene_id}/events/stream"]
+
+
+@schema.exclude(path=STREAMED).parametrize()
 @FUZZED
 def test_no_server_error_and_every_answer_as_documented(case: OpenApiCase) -> None:
     call(case, CHECKS)
@@ -89,7 +94,7 @@ CONTENT_CHECKED = [
 ]
 
 
-@schema.exclude(method="POST", path=CONTENT_CHECKED).parametrize()
+@schema.exclude(method="POST", path=CONTENT_CHECKED).exclude(path=STREAMED).parametrize()
 @FUZZED
 def test_what_the_schema_calls_valid_is_accepted(case: OpenApiCase) -> None:
     call(case, [not_a_server_error, positive_data_acceptance])

@@ -391,3 +391,69 @@ def test_labels_never_cover_each_other_and_a_scale_bar_fits(
         shot(page, f"7-labels-{viewport[0]}")
     finally:
         context.close()
+
+
+def post_and_wait(demo: DemoScene, prefix: str) -> int:
+    """More views of the room as batches, every one processed; the new head."""
+    with httpx.Client(base_url=demo.url, timeout=30.0) as client:
+        bodies = wire_batches(ROOM.without("mug"), TABLE_VIEWS, prefix, ambiguity=AMBIGUOUS_TABLE)
+        for body in bodies:
+            response = client.post(f"/v1/scenes/{demo.scene_id}/batches", json=body)
+            assert response.status_code == 202, response.text
+        last = f"/v1/scenes/{demo.scene_id}/batches/{bodies[-1]['batch_id']}"
+        deadline = time.monotonic() + 60
+        while client.get(last).json()["status"] != "done":
+            assert time.monotonic() < deadline, "the batches were not processed in time"
+            time.sleep(0.2)
+    return head_now(demo)
+
+
+def counter(page: Page, name: str) -> int:
+    return int(page.locator("body").get_attribute(f"data-{name}") or 0)
+
+
+def test_following_the_head_reads_the_feed_rather_than_polling(
+    demo: DemoScene, browsed: Browsed
+) -> None:
+    page = browsed.page
+    requested: list[tuple[str, str | None]] = []  # (path, Last-Event-ID)
+    page.on(
+        "request",
+        lambda r: requested.append((urlsplit(r.url).path, r.headers.get("last-event-id"))),
+    )
+    scene_path = f"/v1/scenes/{demo.scene_id}"
+    page.goto(f"{demo.url}/viewer?scene={demo.scene_id}")
+    shown_at(page, head_now(demo))
+    follow = page.locator("#follow")
+    # Batches arrive while the page is open: the feed brings each new head.
+    shown_at(page, post_and_wait(demo, "g1"))
+    assert counter(page, "feed-events") >= 1
+    # Scrub back and forth: no longer following; new events leave the view where it is.
+    page.locator("#seq").fill(str(demo.last_published))
+    shown_at(page, demo.last_published)
+    page.locator("#seq").fill(str(demo.last_published + 1))
+    shown_at(page, demo.last_published + 1)
+    assert not follow.is_checked()
+    newer = post_and_wait(demo, "g2")
+    deadline = time.monotonic() + 20  # unchecked, the page polls the head for the slider
+    while page.locator("#seq").get_attribute("max") != str(newer):
+        assert time.monotonic() < deadline, "the page did not see the new head"
+        page.wait_for_timeout(100)
+    assert page.locator("body").get_attribute("data-seq") == str(demo.last_published + 1)
+    # Checked again: the newest seq at once, then every new one through the feed.
+    mark, refreshed = len(requested), counter(page, "feed-refreshes")
+    follow.check()
+    shown_at(page, newer)
+    newest = post_and_wait(demo, "g3")
+    shown_at(page, newest)
+    page.wait_for_timeout(1000)  # nothing more should come
+    since = [path for path, _ in requested[mark:]]
+    refreshes = counter(page, "feed-refreshes") - refreshed
+    assert refreshes >= 1
+    assert scene_path not in since  # no poll of the head while following
+    assert since.count(f"{scene_path}/graph") == 1 + refreshes  # the jump, then the feed's
+    streams = [last for path, last in requested[mark:] if path == f"{scene_path}/events/stream"]
+    assert streams and streams[0] == str(newer)  # resumed from the head it jumped to
+    assert page.locator("#seq").input_value() == str(newest)
+    assert follow.is_checked()
+    assert browsed.errors == []

@@ -138,6 +138,7 @@ async function openScene(sceneId) {
   $("track-detail").replaceChildren(el("p", { className: "hint" }, "Click a track on the map or in the list."));
   const scene = await api(scenePath());
   setHead(scene.head_seq, true);
+  startFeed();
   await Promise.all([showSeq(view.head), loadVerifications()]);
 }
 
@@ -149,7 +150,7 @@ function setHead(head, moveSlider) {
 }
 
 async function pollHead() {
-  if (!view.sceneId) return;
+  if (!view.sceneId || feed.controller) return;  // the feed brings the head while following
   try {
     const scene = await api(scenePath());
     if (scene.head_seq === view.head) return;
@@ -162,6 +163,124 @@ async function pollHead() {
   } catch (error) {
     failed(error);
   }
+}
+
+// --- following the head: the live feed -------------------------------------------------------
+// While "follow the head" is checked the page reads GET .../events/stream, with fetch and a
+// stream reader (EventSource cannot send the bearer token), and redraws the newest seq at most
+// every FEED_DEBOUNCE_MS while events arrive. A lost or dropped stream is resumed with
+// Last-Event-ID after a backoff; unchecked, the page polls the head for the slider's range.
+
+const FEED_DEBOUNCE_MS = 150;
+const FEED_RETRY_MS = [500, 10000]; // first and longest wait before resuming a lost stream
+const feed = { controller: null, lastId: -1, timer: null, retry: null, retryMs: 500, events: 0, refreshes: 0 };
+
+function stopFeed() {
+  if (feed.controller) feed.controller.abort();
+  feed.controller = null;
+  clearTimeout(feed.timer);
+  clearTimeout(feed.retry);
+}
+
+// Follows the open scene from seq `after` on (default: the head the page knows).
+function startFeed(after = view.head) {
+  stopFeed();
+  if (!view.sceneId || !$("follow").checked) return;
+  const controller = new AbortController();
+  const sceneId = view.sceneId;
+  feed.controller = controller;
+  feed.lastId = after;
+  readFeed(sceneId, controller)
+    .then((ended) => ended && say(`scene ${sceneId}: the feed ended (${ended})`))
+    .catch((error) => controller.signal.aborted || failed(error))
+    .finally(() => {
+      if (feed.controller !== controller) return; // stopped, or another scene's feed
+      feed.controller = null;
+      if (controller.signal.aborted) return;
+      feed.retry = setTimeout(resumeFeed, feed.retryMs);
+      feed.retryMs = Math.min(feed.retryMs * 2, FEED_RETRY_MS[1]);
+    });
+}
+
+function resumeFeed() {
+  if (!feed.controller) startFeed(Math.max(feed.lastId, view.head));
+}
+
+// Reads one stream until it closes; the reason of an `end` message (no resuming then), else null.
+async function readFeed(sceneId, controller) {
+  const headers = { Accept: "text/event-stream", "Last-Event-ID": String(feed.lastId) };
+  if (token()) headers.Authorization = `Bearer ${token()}`;
+  const response = await fetch(`/v1/scenes/${encodeURIComponent(sceneId)}/events/stream`, {
+    headers,
+    cache: "no-store",
+    signal: controller.signal,
+  });
+  if (!response.ok) throw new ApiError(response.status, await response.json().catch(() => null));
+  const reader = response.body.pipeThrough(new TextDecoderStream()).getReader();
+  let ended = null;
+  const parse = sseParser((message) => {
+    if (message.event === "end") ended = JSON.parse(message.data).reason || "end";
+    else if (message.event !== "dropped") feedEvent(Number(message.id));
+  });
+  for (;;) {
+    const { value, done } = await reader.read();
+    if (done) return null;
+    parse(value);
+    if (ended) {
+      controller.abort();
+      return ended;
+    }
+  }
+}
+
+// An incremental text/event-stream parser (lines end in CRLF, LF or CR, even across chunks;
+// `:` comments; data lines joined with newlines; a blank line dispatches).
+function sseParser(dispatch) {
+  let buffer = "";
+  let afterCr = false;
+  let message = { event: "", data: [], id: null };
+  return (text) => {
+    if (afterCr && text.startsWith("\n")) text = text.slice(1);
+    afterCr = text.endsWith("\r");
+    const lines = (buffer + text).split(/\r\n|\r|\n/);
+    buffer = lines.pop();
+    for (const line of lines) {
+      if (line === "") {
+        if (message.data.length) {
+          dispatch({ event: message.event || "message", data: message.data.join("\n"), id: message.id });
+        }
+        message = { event: "", data: [], id: message.id };
+        continue;
+      }
+      if (line.startsWith(":")) continue;
+      const colon = line.indexOf(":");
+      const name = colon < 0 ? line : line.slice(0, colon);
+      let value = colon < 0 ? "" : line.slice(colon + 1);
+      if (value.startsWith(" ")) value = value.slice(1);
+      if (name === "event") message.event = value;
+      else if (name === "data") message.data.push(value);
+      else if (name === "id" && !value.includes("\0")) message.id = value;
+    }
+  };
+}
+
+function feedEvent(seq) {
+  if (!(seq > feed.lastId)) return; // seen already
+  feed.lastId = seq;
+  feed.retryMs = FEED_RETRY_MS[0];
+  feed.events += 1;
+  document.body.dataset.feedEvents = String(feed.events);
+  clearTimeout(feed.timer);
+  feed.timer = setTimeout(() => refreshFromFeed().catch(failed), FEED_DEBOUNCE_MS);
+}
+
+async function refreshFromFeed() {
+  const follow = $("follow").checked;
+  setHead(Math.max(view.head, feed.lastId), follow);
+  feed.refreshes += 1;
+  document.body.dataset.feedRefreshes = String(feed.refreshes);
+  if (follow) await showSeq(view.head);
+  await loadVerifications();
 }
 
 // --- one seq: graph, occupancy, events ------------------------------------------------------
@@ -571,13 +690,19 @@ function start() {
   $("seq").addEventListener("input", (event) => {
     $("seq-label").textContent = event.target.value;
     $("follow").checked = Number(event.target.value) === view.head;
+    if (!$("follow").checked) stopFeed();
+    else if (!feed.controller) startFeed();
     clearTimeout(sliderTimer);
     sliderTimer = setTimeout(() => showSeq(Number(event.target.value)), 120);
   });
   $("follow").addEventListener("change", (event) => {
-    if (!event.target.checked || !view.sceneId) return;
-    setHead(view.head, true);  // back to the newest seq now, then to every new one
+    if (!event.target.checked || !view.sceneId) {
+      stopFeed();
+      return;
+    }
+    setHead(view.head, true);  // back to the newest seq now, then to every new one (the feed)
     showSeq(view.head).catch(failed);
+    startFeed();
   });
   $("show-all").addEventListener("change", () => showSeq(view.seq));
   $("events-earlier").addEventListener("click", () => pageEvents(-1));
