@@ -7,18 +7,27 @@ import io
 import re
 from pathlib import Path
 
+from api_schema import BatchIn
+from pbdag_client import Client
+from service.auth import create_token
 from tests.client.conftest import Service
+from tests.wire_scenes import batch
 
 ROOT = Path(__file__).resolve().parents[2]
 CLIENT_GUIDE = ROOT / "docs" / "client.md"
 README = ROOT / "README.md"
 
 
+def python_blocks(page: Path) -> list[str]:
+    """The Python blocks of a page, in order."""
+    return re.findall(r"```python\n(.*?)```", page.read_text(), re.DOTALL)
+
+
 def first_python_block(page: Path) -> str:
     """The first Python block of a page."""
-    found = re.search(r"```python\n(.*?)```", page.read_text(), re.DOTALL)
-    assert found is not None, f"{page.name} has no Python example"
-    return found.group(1)
+    found = python_blocks(page)
+    assert found, f"{page.name} has no Python example"
+    return found[0]
 
 
 def run_example(code: str, url: str, name: str) -> list[str]:
@@ -38,3 +47,21 @@ def test_the_guide_example_posts_a_frame_and_explains_the_track(service: Service
     listed = run_example(first_python_block(README), service.url, "README.md")
     track_id = lines[0].split()[0]
     assert listed == [f"{track_id} mug tentative None"]
+
+
+def test_the_guide_example_deletes_a_half_made_scene_and_renames_the_others(
+    service: Service,
+) -> None:
+    token = create_token(service.container.engine, "guide", ["admin"]).token
+    with Client(service.url) as client:
+        empty = client.create_scene("sim-demo")
+        used = client.create_scene("sim-demo")
+        client.rename_scene(used.id, "sim-demo")  # the same name: nothing appended
+        client.post_batch(used.id, BatchIn.model_validate(batch("b0", 0)))
+        client.wait_for_batch(used.id, "b0")
+    code = python_blocks(CLIENT_GUIDE)[1].replace("ADMIN_TOKEN = None", f"ADMIN_TOKEN = {token!r}")
+    lines = run_example(code, service.url, "docs/client.md")
+    assert f"deleted {empty.id} 1 events 0 batches" in lines
+    assert f"kept sim-demo {used.id}" in lines
+    with Client(service.url) as client:
+        assert empty.id not in [scene.id for scene in client.scenes()]

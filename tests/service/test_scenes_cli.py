@@ -74,8 +74,8 @@ def test_rename_appends_the_name_and_refuses_unknown_scenes_and_bad_names(
     assert "nothing appended" in capsys.readouterr().out
 
     assert main(["scenes", "rename", "scn-000000000000", "x"]) == 1
-    err = capsys.readouterr().err.splitlines()
-    assert err[-1] == "pbdag scenes rename: scene 'scn-000000000000' does not exist"
+    unknown = capsys.readouterr().err.splitlines()
+    assert unknown[-1] == "pbdag scenes rename: scene 'scn-000000000000' does not exist"
     assert main(["scenes", "rename", kitchen, "bad\tname"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("pbdag scenes rename: NAME: ") and err.count("\n") == 1

@@ -94,9 +94,11 @@ CONTENT_CHECKED = [
 CONFIRMED = "/v1/scenes/{scene_id}"
 
 
-@schema.exclude(method="POST", path=CONTENT_CHECKED).exclude(
-    method="DELETE", path=CONFIRMED
-).parametrize()
+@(
+    schema.exclude(method="POST", path=CONTENT_CHECKED)
+    .exclude(method="DELETE", path=CONFIRMED)
+    .parametrize()
+)
 @FUZZED
 def test_what_the_schema_calls_valid_is_accepted(case: OpenApiCase) -> None:
     call(case, [not_a_server_error, positive_data_acceptance])
