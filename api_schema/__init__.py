@@ -53,6 +53,7 @@ from api_schema.responses import (
     VisibleMiss,
     WorkerStatus,
 )
+from api_schema.scenes import SceneDeleted, SceneRename
 
 __all__ = [
     "BaselineList",
@@ -95,7 +96,9 @@ __all__ = [
     "RobotPose",
     "Scene",
     "SceneCreate",
+    "SceneDeleted",
     "SceneList",
+    "SceneRename",
     "TrackBelief",
     "Uncertainty",
     "VerdictIn",

@@ -45,6 +45,15 @@ class SceneCreated(BaseEvent):
 
 
 @dataclass(frozen=True, kw_only=True)
+class SceneRenamed(BaseEvent):
+    """The scene's name from here on (`PATCH /v1/scenes/{id}`); its parameters stay as recorded."""
+
+    topic: ClassVar[str] = "scene_renamed"
+    type: ClassVar[str] = "scene_renamed"
+    name: str
+
+
+@dataclass(frozen=True, kw_only=True)
 class FixtureEvidence(BaseEvent):
     """Class evidence of the batch's fixture masks, added to the scene's voxel map."""
 
@@ -428,6 +437,7 @@ Sighting = ObjectAdded | FixtureAdded | ObjectObserved | FixtureObserved
 # `assert_never`, fails type checking until it has a case for the new class.
 Event = (
     SceneCreated
+    | SceneRenamed
     | FixtureEvidence
     | OccupancyEvidence
     | BaselineFrozen

@@ -23,6 +23,7 @@ from core.events import (
     ObjectReidentified,
     OccupancyEvidence,
     SceneCreated,
+    SceneRenamed,
     TrackConfirmed,
     TrackDemoted,
     TrackMoved,
@@ -63,6 +64,8 @@ def fold(state: SceneState, events: Iterable[Event]) -> SceneState:
                 params = Params.recorded(event.params)
                 name = event.name
                 source_baseline = None if event.baseline is None else event.baseline.__dict__
+            case SceneRenamed():
+                name = event.name
             case FixtureEvidence():
                 voxels = voxels.with_event(event)
             case OccupancyEvidence():

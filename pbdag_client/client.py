@@ -42,7 +42,9 @@ from api_schema import (
     RobotPose,
     Scene,
     SceneCreate,
+    SceneDeleted,
     SceneList,
+    SceneRename,
     TrackBelief,
     VerdictIn,
     VerificationItem,
@@ -136,6 +138,15 @@ class _Routes:
     @staticmethod
     def scene(scene_id: str) -> _Call[Scene]:
         return _Call("GET", _scene(scene_id), _model(Scene))
+
+    @staticmethod
+    def rename_scene(scene_id: str, name: str) -> _Call[Scene]:
+        return _Call("PATCH", _scene(scene_id), _model(Scene), body=SceneRename(name=name))
+
+    @staticmethod
+    def delete_scene(scene_id: str, confirm: str) -> _Call[SceneDeleted]:
+        query = _query(confirm=confirm)
+        return _Call("DELETE", _scene(scene_id), _model(SceneDeleted), query)
 
     @staticmethod
     def post_batch(scene_id: str, batch: BatchIn) -> _Call[BatchStatus]:
@@ -392,6 +403,17 @@ class Client:
         """`GET /v1/scenes/{id}`: one scene with its head seq and parameters."""
         return self._send(_Routes.scene(scene_id))
 
+    def rename_scene(self, scene_id: str, name: str) -> Scene:
+        """`PATCH /v1/scenes/{id}`: the scene under its new name (a `scene_renamed` event in
+        its log; the same name again changes nothing). A name the text rule refuses raises
+        pydantic's ValidationError before anything is sent, as `create_scene` does."""
+        return self._send(_Routes.rename_scene(scene_id, name))
+
+    def delete_scene(self, scene_id: str, *, confirm: str) -> SceneDeleted:
+        """`DELETE /v1/scenes/{id}` (admin): the scene and everything it holds, for good;
+        `confirm` must repeat `scene_id` (else `InvalidRequest`, nothing deleted)."""
+        return self._send(_Routes.delete_scene(scene_id, confirm))
+
     # --- batches ------------------------------------------------------------------------------
 
     def post_batch(self, scene_id: str, batch: BatchIn) -> BatchStatus:
@@ -645,6 +667,14 @@ class AsyncClient:
     async def scene(self, scene_id: str) -> Scene:
         """`GET /v1/scenes/{id}`."""
         return await self._send(_Routes.scene(scene_id))
+
+    async def rename_scene(self, scene_id: str, name: str) -> Scene:
+        """`PATCH /v1/scenes/{id}`."""
+        return await self._send(_Routes.rename_scene(scene_id, name))
+
+    async def delete_scene(self, scene_id: str, *, confirm: str) -> SceneDeleted:
+        """`DELETE /v1/scenes/{id}` (admin); `confirm` repeats `scene_id`."""
+        return await self._send(_Routes.delete_scene(scene_id, confirm))
 
     async def post_batch(self, scene_id: str, batch: BatchIn) -> BatchStatus:
         """`POST .../batches`."""

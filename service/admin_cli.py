@@ -132,7 +132,8 @@ def _rebuild_scenes(log: EventLog, only: list[str] | None) -> int:
             ""
             if report.identical
             else f" (tracks {report.tracks_differ}, snapshots {report.snapshots_differ}, "
-            f"baselines {report.baselines_differ})"
+            f"baselines {report.baselines_differ}"
+            f"{', the name' if report.name_differs else ''})"
         )
         verdict = "identical" if report.identical else "DIFFERED"
         reencoded = (

@@ -1,5 +1,5 @@
 """`pbdag`: serve the API, run workers, migrate, export the OpenAPI file (and the commands of
-service/auth_cli.py and service/admin_cli.py).
+service/auth_cli.py, service/admin_cli.py and service/scenes_cli.py).
 
 Exit codes: 0 done, 1 the command ran and found a problem, 2 a configuration or usage error (one
 line on stderr), 3 `serve` could not listen on its port, 141 standard output closed early.
@@ -32,6 +32,7 @@ from service.cli_support import (
     settings_problem,
 )
 from service.logs import configure_logging
+from service.scenes_cli import register as register_scene_commands
 from service.settings import Settings, SettingsError
 
 if TYPE_CHECKING:
@@ -46,8 +47,8 @@ OPENAPI_PATH = Path(__file__).resolve().parents[1] / "api_schema" / "openapi.jso
 DISTRIBUTION = "pbdag"  # [project] name in pyproject.toml
 DESCRIPTION = (
     "The long-term 3D scene-graph memory of a robot: serve its HTTP API, run workers, create or "
-    "upgrade the database, manage API tokens, rebuild, repair and export scenes, collect old raw "
-    "batches, move them between blob backends."
+    "upgrade the database, manage API tokens, list, rename, delete, rebuild, repair and export "
+    "scenes, collect old raw batches, move them between blob backends."
 )
 EPILOG = (
     "`pbdag COMMAND --help` lists a command's options. Every command that opens the database "
@@ -80,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_service_commands(commands)
     register_token_commands(commands)  # `pbdag token create|list|revoke`
     register_admin_commands(commands)  # `pbdag rebuild|requeue|repair|gc|export|blobs`
+    register_scene_commands(commands)  # `pbdag scenes list|rename|delete`
     for entry_point in entry_points(group="pbdag.commands"):  # e.g. `pbdag eval`, from evaluation
         try:
             entry_point.load()(commands)

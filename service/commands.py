@@ -11,7 +11,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import replace
 
 from core.baseline import BaselinePackage, decide_load
-from core.events import Event
+from core.events import Event, SceneRenamed
 from core.params import Params
 from core.state import SceneState
 from core.values import BaselineSource
@@ -50,3 +50,15 @@ def create_scene(
         appended = work.append(record.id, state, decide_load(package))
     assert appended.seqs is not None
     return replace(record, head_seq=appended.seqs[1])
+
+
+def rename_scene(container: Container, scene_id: str, name: str) -> Appended:
+    """Record the scene's new name in its log (`scene_renamed`); the scene row follows in the
+    same transaction. The name is part of the log (event 0 records it, the state folds it), so
+    a rename is an event replay applies, never an update of the row alone: `pbdag rebuild` and
+    every replay agree with the row. The same name again appends nothing."""
+
+    def decide(state: SceneState) -> list[Event]:
+        return [] if state.name == name else [SceneRenamed(name=name)]
+
+    return run_command(container, scene_id, decide)[1]

@@ -90,7 +90,7 @@ class Metrics:
             labelnames=["outcome"],
             registry=self.registry,
         )
-        for outcome in ("done", "retry", "dead", "lease_lost"):
+        for outcome in ("done", "retry", "dead", "lease_lost", "dropped"):
             self.batches_processed.labels(outcome)
         self.dead_letters = Counter(
             "pbdag_dead_letters",

@@ -1,7 +1,8 @@
 """Raw batch retention and `pbdag gc`: which raw batches may go, and deleting them safely.
 
-Events are kept forever; only a batch's raw body (its blob) is collected. A batch's raw body is
-**expired** when the batch is done or dead, finished more than `PBDAG_RAW_RETENTION` ago, and
+Events are kept (until an administrator deletes their whole scene,
+service/store/scene_deletion.py); only a batch's raw body (its blob) is collected. A batch's raw
+body is **expired** when the batch is done or dead, finished more than `PBDAG_RAW_RETENTION` ago, and
 is not **referenced**. Neither a verification nor an inspection names a batch: they name
 frames. A verification request (`verification_requested`) and a fixture's track carry
 `best_frame`, the frame to crop for a verifier; an inspection capture brings its own frames in

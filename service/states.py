@@ -49,3 +49,12 @@ class StateReader:
             while len(self._cache) > self.capacity:
                 self._cache.popitem(last=False)
         return state
+
+    def forget(self, scene_id: str) -> None:
+        """Drop the scene's cached states (it was deleted). A state is never served from the
+        cache without the scene's row read first, so a deleted scene is a 404 even in another
+        process's reader; this frees the memory, and keeps a scene later created under the
+        same id from meeting the old one's states."""
+        with self._lock:
+            for key in [key for key in self._cache if key[0] == scene_id]:
+                del self._cache[key]

@@ -7,7 +7,9 @@ decode, or deciding it fails or yields a non-finite number) is parked as dead at
 scene moves on: the log records the gap (`batch_skipped`), so a bad batch never stalls a robot's
 memory and never hides. Errors stored on a batch are short; the details go to the server log.
 The store translates driver and file-system errors at its adapter: the worker knows only the
-project's own exceptions.
+project's own exceptions. A batch whose scene an administrator deleted while it was worked on
+(its queue row went with the scene) is dropped with one line: nothing is recorded, nothing of
+the scene is written again.
 """
 
 from __future__ import annotations
@@ -34,7 +36,12 @@ from pbdag_errors import PbdagError
 from service.bootstrap import Container
 from service.logs import log_context
 from service.store.blobs import BlobNotFound, RawBatchMissing
-from service.store.errors import ConcurrencyConflict, LeaseLost, StoreUnavailable
+from service.store.errors import (
+    ConcurrencyConflict,
+    LeaseLost,
+    SceneNotFound,
+    StoreUnavailable,
+)
 from service.store.queue_records import Claim, RawBatchCollected
 from service.store.raw_batches import decode_raw_batch
 
@@ -171,12 +178,15 @@ class Worker:
                     work.complete(claim, appended.seqs)
         except LeaseLost:
             self._states.pop(claim.scene_id, None)
+            if self._dropped(claim):
+                return
             metrics.batches_processed.labels("lease_lost").inc()
             logger.warning("worker %s lost the lease of batch %s", self.name, claim.batch_id)
             return
         except Exception as error:
             self._states.pop(claim.scene_id, None)
-            self._failed(claim, error)
+            if not self._dropped(claim):
+                self._failed(claim, error)
             return
         metrics.batches_processed.labels("done").inc()
         self._healthy()
@@ -188,6 +198,23 @@ class Worker:
             "" if appended.seqs is None else f", seq {appended.seqs[0]}..{appended.seqs[1]}",
         )
         self._remember(claim.scene_id, appended.state)
+
+    def _dropped(self, claim: Claim) -> bool:
+        """Whether the claim's scene was deleted (its batch went with it): then one line says
+        the batch is dropped, and there is nothing to record. False when the scene exists or
+        cannot be read now (the failure is then recorded as any other)."""
+        try:
+            self.container.log.scene(claim.scene_id)
+        except SceneNotFound:
+            self._states.pop(claim.scene_id, None)
+            self.container.metrics.batches_processed.labels("dropped").inc()
+            logger.info(
+                "batch %s dropped: its scene %s was deleted", claim.batch_id, claim.scene_id
+            )
+            return True
+        except Exception:
+            return False
+        return False
 
     def _raw_body(self, claim: Claim) -> bytes:
         """The stored batch; RawBatchCollected when `pbdag gc` deleted it (a copy made by
@@ -241,6 +268,9 @@ class Worker:
             except LeaseLost:
                 pass  # another worker settled it when the lease expired
             except Exception as error:
+                if self._dropped(claim):  # its scene was deleted meanwhile
+                    del self._unrecorded[key]
+                    continue
                 cause = operator_cause(error)
                 self._unhealthy(f"cannot record the failure of batch {claim.batch_id}: {cause}")
                 return False
@@ -289,8 +319,8 @@ class Worker:
                         )
                     else:
                         self.skip(claim, reason)
-            except LeaseLost:
-                continue  # another worker settled it first
+            except (LeaseLost, SceneNotFound):
+                continue  # another worker settled it first, or the scene was deleted
 
     @contextmanager
     def _renewing(self, claim: Claim) -> Iterator[None]:

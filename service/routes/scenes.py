@@ -1,20 +1,27 @@
-"""Scenes: create, list, read."""
+"""Scenes: create, list, read, rename, delete.
+
+Deleting a scene (admin scope, `?confirm=` the scene's id) is the one exception to the
+append-only log: the scene's rows go from every table (service/store/scene_deletion.py).
+"""
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Annotated
 
 from fastapi import APIRouter, Query
 
-from api_schema import Scene, SceneCreate, SceneList
-from core.errors import NotFound
+from api_schema import Scene, SceneCreate, SceneDeleted, SceneList, SceneRename
+from core.errors import InvalidCommand, NotFound
 from core.params import Params, deep_merge
 from core.profiles import PROFILES
 from core.values import BaselineSource
-from service.commands import create_scene
-from service.deps import AnySceneDep, ContainerDep, text_query
+from service.auth import RequireAdmin
+from service.commands import create_scene, rename_scene
+from service.deps import AnySceneDep, ContainerDep, SceneDep, StatesDep, text_query
 from service.store.baselines import read_package
 from service.store.errors import SceneNotFound
+from service.store.scene_deletion import delete_scene
 from service.wire import scene_out
 
 router = APIRouter(prefix="/v1/scenes", tags=["scenes"])
@@ -61,3 +68,33 @@ def list_scenes(
 def get_scene(scene: AnySceneDep) -> Scene:
     """One scene with its head seq and parameters."""
     return scene_out(scene)
+
+
+@router.patch("/{scene_id}", response_model=Scene)
+def patch_scene(scene: SceneDep, body: SceneRename, container: ContainerDep) -> Scene:
+    """Rename the scene: a `scene_renamed` event in its log (the name is part of the log, so
+    replay and `pbdag rebuild` give the same name); the same name again appends nothing."""
+    rename_scene(container, scene.id, body.name)
+    return scene_out(container.log.scene(scene.id))
+
+
+@router.delete("/{scene_id}", response_model=SceneDeleted)
+def delete_scene_route(
+    _admin: RequireAdmin,
+    scene: AnySceneDep,
+    container: ContainerDep,
+    states: StatesDep,
+    confirm: Annotated[
+        str | None, text_query("The scene's id again: the deletion cannot be undone.", 64)
+    ] = None,
+) -> SceneDeleted:
+    """Delete the scene and everything it holds (admin scope), quarantined or not: its log,
+    projections, queue rows and the raw batches no other scene names. The one exception to the
+    append-only log; scenes started from its baselines keep their copy."""
+    if confirm != scene.id:
+        raise InvalidCommand(
+            "confirm must repeat the scene's id to delete it; nothing was deleted", "confirm"
+        )
+    deleted = delete_scene(container.engine, container.blobs, scene.id)
+    states.forget(scene.id)
+    return SceneDeleted(**dataclasses.asdict(deleted))

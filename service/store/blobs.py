@@ -74,9 +74,10 @@ class BlobStore(Protocol):
         """The bytes stored under `key`; BlobNotFound if none."""
         ...
 
-    def delete(self, key: str) -> bool:
+    def delete(self, key: str, connection: sa.Connection | None = None) -> bool:
         """Remove the blob; False when there was none. The caller decides that no batch still
-        needs it."""
+        needs it. With `connection`, a store that joins transactions deletes in that one (it
+        commits or rolls back with it); any other deletes at once."""
         ...
 
     def keys(self) -> Iterator[str]:
@@ -144,8 +145,9 @@ class FileBlobStore:
             except FileNotFoundError:
                 raise BlobNotFound(key) from None
 
-    def delete(self, key: str) -> bool:
-        """Remove the blob (the rename of `put` makes this atomic); False when it was absent."""
+    def delete(self, key: str, connection: sa.Connection | None = None) -> bool:
+        """Remove the blob (the rename of `put` makes this atomic); False when it was absent.
+        At once, whatever `connection` is: a file joins no transaction."""
         path = self._path(key)
         with _disk_failures("deleting a blob"):
             try:
@@ -257,11 +259,14 @@ class PgBlobStore:
             raise BlobNotFound(key)
         return bytes(row[0])
 
-    def delete(self, key: str) -> bool:
-        """Remove the blob's row; False when there was none."""
-        with write_transaction(self.engine) as connection:
-            deleted = connection.execute(sa.delete(blobs).where(blobs.c.key == key)).rowcount
-        return bool(deleted)
+    def delete(self, key: str, connection: sa.Connection | None = None) -> bool:
+        """Remove the blob's row, in `connection`'s transaction or one of its own; False when
+        there was none."""
+        statement = sa.delete(blobs).where(blobs.c.key == key)
+        if connection is not None:
+            return bool(connection.execute(statement).rowcount)
+        with write_transaction(self.engine) as own:
+            return bool(own.execute(statement).rowcount)
 
     def keys(self) -> Iterator[str]:
         """Every stored key, streamed (a server-side cursor)."""
@@ -306,8 +311,8 @@ class MemoryBlobStore:
         except KeyError:
             raise BlobNotFound(key) from None
 
-    def delete(self, key: str) -> bool:
-        """Forget the blob; False when there was none."""
+    def delete(self, key: str, connection: sa.Connection | None = None) -> bool:
+        """Forget the blob (at once); False when there was none."""
         return self._blobs.pop(key, None) is not None
 
     def keys(self) -> Iterator[str]:

@@ -1,4 +1,5 @@
-"""The current track table as a SQL projection of the log, and its rebuild."""
+"""The current track table (and the scene row's name) as SQL projections of the log, and
+their rebuild."""
 
 from __future__ import annotations
 
@@ -62,6 +63,11 @@ def write_tracks(
     )
 
 
+def write_scene_name(connection: sa.Connection, scene_id: str, name: str) -> None:
+    """The scene row's name, as the log's newest `scene_created` or `scene_renamed` says."""
+    connection.execute(sa.update(scenes).where(scenes.c.id == scene_id).values(name=name))
+
+
 def write_baseline(
     connection: sa.Connection,
     scene_id: str,
@@ -112,6 +118,7 @@ class SceneRebuild:
     tracks_differ: list[str] = field(default_factory=list)
     snapshots_differ: list[int] = field(default_factory=list)
     baselines_differ: list[int] = field(default_factory=list)
+    name_differs: bool = False  # the scene row's name was not the log's (rewritten)
     # Snapshots that were in an older body format (a cache `as_of` ignored): rewritten in the
     # current one, not a difference.
     snapshots_reencoded: int = 0
@@ -122,7 +129,12 @@ class SceneRebuild:
     @property
     def identical(self) -> bool:
         """True when the rebuilt projections equal the old ones bit for bit."""
-        return not self.tracks_differ and not self.snapshots_differ and not self.baselines_differ
+        return not (
+            self.tracks_differ
+            or self.snapshots_differ
+            or self.baselines_differ
+            or self.name_differs
+        )
 
 
 def _projections(
@@ -217,9 +229,9 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
     with write_transaction(log.engine) as connection:
         # An append updates the scene's row: locked here, appends to this scene wait (SQLite's
         # write transaction already holds the whole database).
-        connection.execute(
-            sa.select(scenes.c.head_seq).where(scenes.c.id == scene_id).with_for_update()
-        )
+        stored_name = connection.execute(
+            sa.select(scenes.c.name).where(scenes.c.id == scene_id).with_for_update()
+        ).scalar_one()
         old_tracks, old_snapshots, old_formats, old_baselines = _projections(connection, scene_id)
         replay.feed(log.read(scene_id, after=replay.head, connection=connection), old_snapshots)
         state, count, touched = replay.state, replay.count, replay.touched
@@ -230,6 +242,8 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
         connection.execute(sa.delete(snapshots).where(snapshots.c.scene_id == scene_id))
         connection.execute(sa.delete(baselines).where(baselines.c.scene_id == scene_id))
         write_tracks(connection, scene_id, state, touched)
+        if state.name != stored_name:
+            write_scene_name(connection, scene_id, state.name)
         new_baselines = {
             event.version: (
                 seq,
@@ -244,7 +258,7 @@ def rebuild_scene(log: EventLog, scene_id: str) -> SceneRebuild:
                     scene_id=scene_id, seq=seq, format_version=SNAPSHOT_VERSION, body=body
                 )
             )
-    report = SceneRebuild(scene_id, count)
+    report = SceneRebuild(scene_id, count, name_differs=state.name != stored_name)
     for track_id in sorted(set(old_tracks) | set(state.tracks)):
         new = (
             track_row(scene_id, state.tracks[track_id], touched[track_id])

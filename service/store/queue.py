@@ -92,7 +92,7 @@ class BatchQueue:
             with write_transaction(self.engine) as connection:
                 existing = self._get(connection, scene_id, batch_id)
                 if existing is None:
-                    if blob is None:  # rows are never deleted: the caller's read was wrong
+                    if blob is None:  # deleted with its scene, or the caller's read was wrong
                         raise StoreError(f"batch {batch_id!r} is not queued; its body is needed")
                     self.check_admission(scene_id, len(blob), bounds, connection)
                     blob_key = self.blobs.put(blob, connection) if key is None else key

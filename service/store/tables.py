@@ -18,7 +18,8 @@ scenes = sa.Table(
     sa.Column("quarantined", sa.Text),
 )
 
-# The append-only log: rows are inserted, never updated or deleted.
+# The append-only log: rows are inserted, never updated or deleted, except when an administrator
+# deletes the whole scene (service/store/scene_deletion.py).
 events = sa.Table(
     "events",
     metadata,

@@ -1,9 +1,10 @@
 """The one write path of the log: every append goes through a unit of work.
 
 In one transaction: the expected-head check, the event rows (only finite numbers), every
-projection (track table, baseline packages, snapshot) and, for a worker's batch, the lease
-fence that marks it done. The worker, every command, scene creation and the tests use it; what
-is decided on a head that another writer moves meanwhile is decided again (`on_the_head`).
+projection (track table, baseline packages, the scene row's name, snapshot) and, for a
+worker's batch, the lease fence that marks it done. The worker, every command, scene creation
+and the tests use it; what is decided on a head that another writer moves meanwhile is decided
+again (`on_the_head`).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from typing import TypeVar
 
 import sqlalchemy as sa
 
-from core.events import BaselineFrozen, BatchSkipped, Event
+from core.events import BaselineFrozen, BatchSkipped, Event, SceneRenamed
 from core.evolve import evolve, fold
 from core.params import Params
 from core.state import SceneState
@@ -23,7 +24,12 @@ from core.values import BaselineSource
 from service.store.engine import write_transaction
 from service.store.errors import ConcurrencyConflict
 from service.store.event_log import EventLog, SceneRecord, snapshot_due
-from service.store.projection import last_seq_by_track, write_baseline, write_tracks
+from service.store.projection import (
+    last_seq_by_track,
+    write_baseline,
+    write_scene_name,
+    write_tracks,
+)
 from service.store.queue import BatchQueue
 from service.store.queue_records import Claim
 
@@ -151,8 +157,10 @@ class Writes:
         after: SceneState,
         first_seq: int,
     ) -> None:
-        """Every projection of an append: tracks, baseline packages, snapshot."""
+        """Every projection of an append: tracks, baseline packages, the scene's name, snapshot."""
         write_tracks(self.connection, scene_id, after, last_seq_by_track(first_seq, events))
+        if any(isinstance(event, SceneRenamed) for event in events):
+            write_scene_name(self.connection, scene_id, after.name)
         if any(isinstance(event, BaselineFrozen) for event in events):
             state = before
             for offset, event in enumerate(events):

@@ -7,8 +7,11 @@ import io
 import re
 from pathlib import Path
 
+from api_schema import BatchIn
 from pbdag_client import Client
+from service.auth import create_token
 from tests.client.conftest import Service
+from tests.wire_scenes import batch
 
 ROOT = Path(__file__).resolve().parents[2]
 CLIENT_GUIDE = ROOT / "docs" / "client.md"
@@ -54,3 +57,21 @@ def test_the_guide_follows_the_log_with_the_feed(service: Service) -> None:
     assert "stream_events" in feed
     printed = run_example(feed, service.url, "docs/client.md (feed)")
     assert printed == [f"{first.seq} add {first.track_id}"]
+
+
+def test_the_guide_example_deletes_a_half_made_scene_and_renames_the_others(
+    service: Service,
+) -> None:
+    token = create_token(service.container.engine, "guide", ["admin"]).token
+    with Client(service.url) as client:
+        empty = client.create_scene("sim-demo")
+        used = client.create_scene("sim-demo")
+        client.rename_scene(used.id, "sim-demo")  # the same name: nothing appended
+        client.post_batch(used.id, BatchIn.model_validate(batch("b0", 0)))
+        client.wait_for_batch(used.id, "b0")
+    code = python_blocks(CLIENT_GUIDE)[2].replace("ADMIN_TOKEN = None", f"ADMIN_TOKEN = {token!r}")
+    lines = run_example(code, service.url, "docs/client.md")
+    assert f"deleted {empty.id} 1 events 0 batches" in lines
+    assert f"kept sim-demo {used.id}" in lines
+    with Client(service.url) as client:
+        assert empty.id not in [scene.id for scene in client.scenes()]

@@ -28,7 +28,7 @@ from tests.golden_logs import BEFORE_EVENT_TOPICS
 def test_every_event_class_has_a_topic_of_its_own() -> None:
     classes = get_args(Event)
     assert all("topic" in cls.__dict__ for cls in classes)  # declared, never inherited
-    assert len(EVENT_CLASSES) == len(classes) == 22
+    assert len(EVENT_CLASSES) == len(classes) == 23
     assert set(EVENT_CLASSES.values()) == set(classes)
     # An old name is never a topic again: its rows would be read as the new class.
     assert set(EVENT_CLASSES).isdisjoint(LEGACY_NAMES)

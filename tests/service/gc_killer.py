@@ -15,6 +15,8 @@ import sys
 import time
 from typing import Any
 
+import sqlalchemy as sa
+
 from service.bootstrap import build_container
 from service.retention import collect
 
@@ -33,9 +35,9 @@ def main(step: str) -> None:
     elif step == "deleted-one":
         original = blobs.delete
 
-        def delete_once(key: str) -> bool:
+        def delete_once(key: str, connection: sa.Connection | None = None) -> bool:
             blobs.delete = killed  # type: ignore[method-assign]
-            return original(key)
+            return original(key, connection)
 
         blobs.delete = delete_once  # type: ignore[method-assign]
     else:
