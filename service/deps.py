@@ -2,20 +2,24 @@
 
 from __future__ import annotations
 
+import math
+from datetime import datetime
 from typing import Annotated, Any
 
 from fastapi import Depends, Path, Query, Request
+from fastapi.exceptions import RequestValidationError
 
 from api_schema.requests import PRINTABLE
 from service.bootstrap import Container
 from service.settings import Settings
 from service.states import StateReader
-from service.store.errors import SceneQuarantined
+from service.store.errors import SceneQuarantined, SeqOutOfRange
 from service.store.event_log import SceneRecord
 from service.store.queue_records import Admission
 
 # Largest integer a query or path may carry: the databases store 64-bit signed integers.
 MAX_INT = 2**53 - 1  # integers a JSON number carries exactly
+MAX_TIMESTAMP = 1e11  # seconds either side of 1970, as a frame's timestamp (api_schema)
 
 
 def get_container(request: Request) -> Container:
@@ -71,6 +75,65 @@ def text_query(description: str, max_length: int = 200) -> Any:
     return Query(max_length=max_length, pattern=PRINTABLE, description=description)
 
 
-AsOf = Annotated[
+SeqQuery = Annotated[
     int | None, Query(ge=0, le=MAX_INT, description="Seq to travel back to (default: the head).")
 ]
+TimeQuery = Annotated[
+    str | None,
+    Query(
+        max_length=40,
+        description="Wall-clock time to travel back to, on the robot's clock (its frames' "
+        "timestamps): ISO 8601 with a timezone (`2026-12-03T10:15:00Z`) or unix seconds "
+        "(`1796292900.5`). The state after the last batch whose newest frame is at or before "
+        "it; 404 before the scene's first batch. Not with `as_of`.",
+        examples=["2026-12-03T10:15:00+00:00"],
+    ),
+]
+
+
+def invalid_input(field: str, reason: str, where: str = "query") -> RequestValidationError:
+    """A 422 naming `field` of the query (or the body), as FastAPI's own validation answers."""
+    return RequestValidationError([{"type": "value_error", "loc": (where, field), "msg": reason}])
+
+
+def parse_time(text: str, field: str = "as_of_time") -> float:
+    """Unix seconds from ISO 8601 with a timezone or from a finite number of seconds, within
+    the frames' timestamp range; a 422 naming `field` otherwise."""
+    try:
+        seconds = float(text)
+    except ValueError:
+        try:
+            moment = datetime.fromisoformat(text)
+        except ValueError:
+            raise invalid_input(field, "not ISO 8601 nor a number of unix seconds") from None
+        if moment.tzinfo is None:
+            raise invalid_input(field, "an ISO 8601 time needs a timezone (Z or +hh:mm)") from None
+        seconds = moment.timestamp()
+    if not math.isfinite(seconds) or abs(seconds) > MAX_TIMESTAMP:
+        raise invalid_input(field, f"must be a finite time within +-{MAX_TIMESTAMP:g} s")
+    return seconds
+
+
+def resolve_as_of(
+    scene: AnySceneDep,
+    container: ContainerDep,
+    as_of: SeqQuery = None,
+    as_of_time: TimeQuery = None,
+) -> int | None:
+    """The seq a read travels back to: `as_of`, or the last seq a batch appended at or before
+    `as_of_time` on the robot's clock; None for the head."""
+    if as_of_time is None:
+        return as_of
+    if as_of is not None:
+        raise invalid_input("as_of_time", "give as_of or as_of_time, not both")
+    at = parse_time(as_of_time)
+    seq = container.log.seq_at_time(scene.id, at)
+    if seq is None:
+        raise SeqOutOfRange(
+            f"no batch of scene {scene.id!r} is at or before {at:.3f} s", "as_of_time"
+        )
+    return seq
+
+
+# The seq to read at: `as_of` or `as_of_time` (both: 422), None for the head.
+AsOf = Annotated[int | None, Depends(resolve_as_of)]
