@@ -1,5 +1,14 @@
 """Wire models of the PBD-AG HTTP API (pydantic only: no core, no service)."""
 
+from api_schema.queries import (
+    HistorySpan,
+    ObjectOut,
+    ObjectPage,
+    SimilarIn,
+    SimilarMatch,
+    SimilarOut,
+    TrackHistory,
+)
 from api_schema.requests import (
     BaselineRef,
     BatchIn,
@@ -75,6 +84,7 @@ __all__ = [
     "GraphEdge",
     "GraphNode",
     "Health",
+    "HistorySpan",
     "Inspection",
     "InspectionIn",
     "InspectionList",
@@ -82,6 +92,8 @@ __all__ = [
     "InspectionQueueItem",
     "Intrinsics",
     "NodeLinkGraph",
+    "ObjectOut",
+    "ObjectPage",
     "Occupancy",
     "PlanIn",
     "PlanOut",
@@ -96,7 +108,11 @@ __all__ = [
     "Scene",
     "SceneCreate",
     "SceneList",
+    "SimilarIn",
+    "SimilarMatch",
+    "SimilarOut",
     "TrackBelief",
+    "TrackHistory",
     "Uncertainty",
     "VerdictIn",
     "VerificationItem",
