@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
-import math
 from datetime import datetime
 from typing import Annotated, Any
 
 from fastapi import Depends, Path, Query, Request
 from fastapi.exceptions import RequestValidationError
+from pydantic import (
+    AwareDatetime,
+    Field,
+    ValidationError,
+    ValidatorFunctionWrapHandler,
+    WrapValidator,
+)
 
 from api_schema.requests import PRINTABLE
 from service.bootstrap import Container
@@ -78,15 +84,32 @@ def text_query(description: str, max_length: int = 200) -> Any:
 SeqQuery = Annotated[
     int | None, Query(ge=0, le=MAX_INT, description="Seq to travel back to (default: the head).")
 ]
+
+
+def _one_reason(value: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+    """One reason for a time that is neither form (not one per member of the union)."""
+    try:
+        return handler(value)
+    except ValidationError:
+        raise ValueError(
+            "ISO 8601 with a timezone (2026-12-03T10:15:00Z) or unix seconds, finite, "
+            f"within +-{MAX_TIMESTAMP:g}"
+        ) from None
+
+
+# A time on the robot's clock: unix seconds (the frames' range), or ISO 8601 with a timezone.
+WallTime = Annotated[
+    Annotated[float, Field(ge=-MAX_TIMESTAMP, le=MAX_TIMESTAMP, allow_inf_nan=False)]
+    | AwareDatetime,
+    WrapValidator(_one_reason),
+]
 TimeQuery = Annotated[
-    str | None,
+    WallTime | None,
     Query(
-        max_length=40,
         description="Wall-clock time to travel back to, on the robot's clock (its frames' "
         "timestamps): ISO 8601 with a timezone (`2026-12-03T10:15:00Z`) or unix seconds "
         "(`1796292900.5`). The state after the last batch whose newest frame is at or before "
         "it; 404 before the scene's first batch. Not with `as_of`.",
-        examples=["2026-12-03T10:15:00+00:00"],
     ),
 ]
 
@@ -96,22 +119,9 @@ def invalid_input(field: str, reason: str, where: str = "query") -> RequestValid
     return RequestValidationError([{"type": "value_error", "loc": (where, field), "msg": reason}])
 
 
-def parse_time(text: str, field: str = "as_of_time") -> float:
-    """Unix seconds from ISO 8601 with a timezone or from a finite number of seconds, within
-    the frames' timestamp range; a 422 naming `field` otherwise."""
-    try:
-        seconds = float(text)
-    except ValueError:
-        try:
-            moment = datetime.fromisoformat(text)
-        except ValueError:
-            raise invalid_input(field, "not ISO 8601 nor a number of unix seconds") from None
-        if moment.tzinfo is None:
-            raise invalid_input(field, "an ISO 8601 time needs a timezone (Z or +hh:mm)") from None
-        seconds = moment.timestamp()
-    if not math.isfinite(seconds) or abs(seconds) > MAX_TIMESTAMP:
-        raise invalid_input(field, f"must be a finite time within +-{MAX_TIMESTAMP:g} s")
-    return seconds
+def seconds(value: float | datetime) -> float:
+    """Unix seconds of a WallTime."""
+    return value.timestamp() if isinstance(value, datetime) else float(value)
 
 
 def resolve_as_of(
@@ -126,7 +136,7 @@ def resolve_as_of(
         return as_of
     if as_of is not None:
         raise invalid_input("as_of_time", "give as_of or as_of_time, not both")
-    at = parse_time(as_of_time)
+    at = seconds(as_of_time)
     seq = container.log.seq_at_time(scene.id, at)
     if seq is None:
         raise SeqOutOfRange(

@@ -4,6 +4,7 @@ what is near a point, what looks like this, and where was that object over time.
 from __future__ import annotations
 
 import math
+from datetime import datetime
 from typing import Annotated
 
 from fastapi import APIRouter, Query
@@ -21,7 +22,7 @@ from service.deps import (
     TimeQuery,
     TrackId,
     invalid_input,
-    parse_time,
+    seconds,
     text_query,
 )
 from service.queries import (
@@ -39,6 +40,9 @@ router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["objects"])
 # Metres: the question's point within the plan's bounds, its radius within a house.
 MAX_COORDINATE = 200.0
 MAX_RADIUS = 100.0
+# One coordinate in -200..200 m, as decimals: the pattern states the bound in the schema.
+_COORDINATE = r"[+-]?(?:200(?:\.0+)?|1[0-9]{2}(?:\.[0-9]+)?|[0-9]{1,2}(?:\.[0-9]+)?)"
+POINT = rf"^{_COORDINATE},{_COORDINATE},{_COORDINATE}$"
 
 
 def parse_point(text: str) -> Vec3:
@@ -56,7 +60,7 @@ def parse_point(text: str) -> Vec3:
 
 
 def _changed_since(
-    container: ContainerDep, scene_id: str, seq: int | None, time: str | None
+    container: ContainerDep, scene_id: str, seq: int | None, time: float | datetime | None
 ) -> int | None:
     """The seq to compare changes with: `changed_since`, or the last seq a batch appended at or
     before `changed_since_time` (-1 before the first: every object changed since)."""
@@ -64,7 +68,7 @@ def _changed_since(
         return seq
     if seq is not None:
         raise invalid_input("changed_since_time", "give changed_since or changed_since_time")
-    at = container.log.seq_at_time(scene_id, parse_time(time, "changed_since_time"))
+    at = container.log.seq_at_time(scene_id, seconds(time))
     return -1 if at is None else at
 
 
@@ -77,7 +81,11 @@ def list_objects(
     label: Annotated[str | None, text_query("Only objects of this class.", 200)] = None,
     near: Annotated[
         str | None,
-        Query(max_length=100, description="A point `x,y,z` in metres: answers by distance."),
+        Query(
+            max_length=100,
+            pattern=POINT,
+            description="A point `x,y,z` in metres (each within +-200): answers by distance.",
+        ),
     ] = None,
     radius: Annotated[
         float | None,
@@ -135,7 +143,7 @@ def _after(
     """The answers that sort after the track `after` (by distance and id, or by id)."""
     cursor = snapshot.tracks.get(after)
     if cursor is None:
-        raise invalid_input("after", f"track {after!r} is not in the scene at this seq")
+        raise NotFound("track", after, "after")
     if point is None:
         return [item for item in found if item[0].track_id > after]
     key = (math.dist(cursor.center, point), after)

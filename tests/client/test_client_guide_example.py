@@ -14,19 +14,30 @@ CLIENT_GUIDE = ROOT / "docs" / "client.md"
 README = ROOT / "README.md"
 
 
+def python_blocks(page: Path) -> list[str]:
+    """The Python blocks of a page, in order."""
+    found = re.findall(r"```python\n(.*?)```", page.read_text(), re.DOTALL)
+    assert found, f"{page.name} has no Python example"
+    return found
+
+
 def first_python_block(page: Path) -> str:
     """The first Python block of a page."""
-    found = re.search(r"```python\n(.*?)```", page.read_text(), re.DOTALL)
-    assert found is not None, f"{page.name} has no Python example"
-    return found.group(1)
+    return python_blocks(page)[0]
 
 
-def run_example(code: str, url: str, name: str) -> list[str]:
-    """The lines an example prints, run against the service at `url`."""
+def run_example(
+    code: str, url: str, name: str, namespace: dict[str, object] | None = None
+) -> list[str]:
+    """The lines an example prints, run against the service at `url` (in `namespace`, for an
+    example that continues another)."""
     assert "http://127.0.0.1:8000" in code and len(code.splitlines()) <= 16
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
-        exec(compile(code.replace("http://127.0.0.1:8000", url), name, "exec"), {})
+        exec(
+            compile(code.replace("http://127.0.0.1:8000", url), name, "exec"),
+            {} if namespace is None else namespace,
+        )
     return printed.getvalue().splitlines()
 
 
@@ -38,3 +49,14 @@ def test_the_guide_example_posts_a_frame_and_explains_the_track(service: Service
     listed = run_example(first_python_block(README), service.url, "README.md")
     track_id = lines[0].split()[0]
     assert listed == [f"{track_id} mug tentative None"]
+
+
+def test_the_guide_questions_continue_the_first_example(service: Service) -> None:
+    first, questions = python_blocks(CLIENT_GUIDE)[:2]
+    namespace: dict[str, object] = {}
+    [posted] = run_example(first, service.url, "docs/client.md", namespace)
+    track_id = posted.split()[0]
+    lines = run_example(questions, service.url, "docs/client.md", namespace)
+    # The one mug, 1.5 m in front of the camera at the origin, on no fixture, with no
+    # appearance; its batch appended the occupancy evidence (seq 1), then its `add` (seq 2).
+    assert lines == [f"{track_id} None ['mug'] 0", "tentative 2 True"]
