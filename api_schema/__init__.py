@@ -1,5 +1,14 @@
 """Wire models of the PBD-AG HTTP API (pydantic only: no core, no service)."""
 
+from api_schema.queries import (
+    HistorySpan,
+    ObjectOut,
+    ObjectPage,
+    SimilarIn,
+    SimilarMatch,
+    SimilarOut,
+    TrackHistory,
+)
 from api_schema.requests import (
     BaselineRef,
     BatchIn,
@@ -76,6 +85,7 @@ __all__ = [
     "GraphEdge",
     "GraphNode",
     "Health",
+    "HistorySpan",
     "Inspection",
     "InspectionIn",
     "InspectionList",
@@ -83,6 +93,8 @@ __all__ = [
     "InspectionQueueItem",
     "Intrinsics",
     "NodeLinkGraph",
+    "ObjectOut",
+    "ObjectPage",
     "Occupancy",
     "PlanIn",
     "PlanOut",
@@ -99,7 +111,11 @@ __all__ = [
     "SceneDeleted",
     "SceneList",
     "SceneRename",
+    "SimilarIn",
+    "SimilarMatch",
+    "SimilarOut",
     "TrackBelief",
+    "TrackHistory",
     "Uncertainty",
     "VerdictIn",
     "VerificationItem",

@@ -336,3 +336,17 @@ def _as_center_extent(box: tuple[float, ...]) -> tuple[Vec3, Vec3]:
     center = ((box[0] + box[3]) / 2, (box[1] + box[4]) / 2, (box[2] + box[5]) / 2)
     extent = (box[3] - box[0], box[4] - box[1], box[5] - box[2])
     return center, extent
+
+
+def track_steps(params: Params, events: Iterable[Event]) -> Iterable[tuple[Event, Track | None]]:
+    """One track's own events (its `add` first), each with the track after it: the fold of
+    the scene restricted to what changes that track alone (`TrackChange`), so a track's history
+    is read from its events without replaying the scene. The track is None until its `add`;
+    events that do not change a single track (a capture names its fixture) leave it as it is."""
+    track: Track | None = None
+    for event in events:
+        if isinstance(event, ObjectAdded | FixtureAdded):
+            track = _observe(_new_track(event), event, params)
+        elif isinstance(event, TrackChange) and track is not None:
+            track = _changed(track, event, params)
+        yield event, track

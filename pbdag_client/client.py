@@ -11,6 +11,7 @@ import asyncio
 import time
 from collections.abc import AsyncIterator, Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from datetime import datetime
 from typing import Any, Generic, Literal, TypeVar
 from urllib.parse import quote
 
@@ -36,6 +37,7 @@ from api_schema import (
     InspectionList,
     InspectionQueue,
     InspectionQueueItem,
+    ObjectPage,
     Occupancy,
     PlanIn,
     PlanOut,
@@ -45,7 +47,10 @@ from api_schema import (
     SceneDeleted,
     SceneList,
     SceneRename,
+    SimilarIn,
+    SimilarOut,
     TrackBelief,
+    TrackHistory,
     VerdictIn,
     VerificationItem,
     VerificationList,
@@ -53,7 +58,7 @@ from api_schema import (
 from pbdag_client.errors import BatchDead, BatchTimeout, RateLimited, problem_error
 from pbdag_client.feed import Resume, follow, follow_async
 
-__all__ = ["DEFAULT_TIMEOUT_S", "AsyncClient", "Client"]
+__all__ = ["DEFAULT_TIMEOUT_S", "AsyncClient", "Client", "WallTime"]
 
 DEFAULT_TIMEOUT_S = 30.0
 EVENTS_PAGE_SIZE = 1000  # the largest page the service serves
@@ -64,6 +69,8 @@ T = TypeVar("T")
 M = TypeVar("M", bound=BaseModel)
 Query = dict[str, str | int | float]
 _TRACKS = TypeAdapter(list[TrackBelief])
+# A time on the robot's clock (`as_of_time`): a timezone-aware datetime, unix seconds, or ISO 8601.
+WallTime = datetime | float | str
 
 
 @dataclass(frozen=True)
@@ -111,6 +118,11 @@ def _scene(scene_id: str) -> str:
 def _query(**values: str | int | float | None) -> Query:
     """Query parameters, leaving out those not given."""
     return {name: value for name, value in values.items() if value is not None}
+
+
+def _wall(value: WallTime | None) -> str | float | None:
+    """A wall-clock time as the query carries it (a datetime in ISO 8601)."""
+    return value.isoformat() if isinstance(value, datetime) else value
 
 
 def scenes_called(scenes: Sequence[Scene], name_or_id: str) -> list[Scene]:
@@ -173,8 +185,11 @@ class _Routes:
         include: Literal["published", "all"],
         parent: str | None,
         label: str | None,
+        as_of_time: WallTime | None = None,
     ) -> _Call[Graph]:
-        query = _query(as_of=as_of, include=include, parent=parent, label=label)
+        query = _query(
+            as_of=as_of, as_of_time=_wall(as_of_time), include=include, parent=parent, label=label
+        )
         return _Call("GET", f"{_scene(scene_id)}/graph", _model(Graph), query)
 
     @staticmethod
@@ -201,9 +216,43 @@ class _Routes:
         )
 
     @staticmethod
-    def track(scene_id: str, track_id: str, as_of: int | None) -> _Call[TrackBelief]:
+    def track(
+        scene_id: str, track_id: str, as_of: int | None, as_of_time: WallTime | None = None
+    ) -> _Call[TrackBelief]:
         path = f"{_scene(scene_id)}/tracks/{_segment(track_id)}"
-        return _Call("GET", path, _model(TrackBelief), _query(as_of=as_of))
+        query = _query(as_of=as_of, as_of_time=_wall(as_of_time))
+        return _Call("GET", path, _model(TrackBelief), query)
+
+    @staticmethod
+    def objects(
+        scene_id: str,
+        filters: Mapping[str, str | int | float | None],
+        as_of: int | None,
+        as_of_time: WallTime | None,
+    ) -> _Call[ObjectPage]:
+        query = _query(**filters, as_of=as_of, as_of_time=_wall(as_of_time))
+        return _Call("GET", f"{_scene(scene_id)}/objects", _model(ObjectPage), query)
+
+    @staticmethod
+    def similar(
+        scene_id: str, body: SimilarIn, as_of: int | None, as_of_time: WallTime | None
+    ) -> _Call[SimilarOut]:
+        path = f"{_scene(scene_id)}/objects/similar"
+        query = _query(as_of=as_of, as_of_time=_wall(as_of_time))
+        return _Call("POST", path, _model(SimilarOut), query, body)
+
+    @staticmethod
+    def history(
+        scene_id: str,
+        track_id: str,
+        after: int,
+        limit: int,
+        as_of: int | None,
+        as_of_time: WallTime | None,
+    ) -> _Call[TrackHistory]:
+        path = f"{_scene(scene_id)}/tracks/{_segment(track_id)}/history"
+        query = _query(after=after, limit=limit, as_of=as_of, as_of_time=_wall(as_of_time))
+        return _Call("GET", path, _model(TrackHistory), query)
 
     @staticmethod
     def explain(scene_id: str, track_id: str, events: bool) -> _Call[Explanation]:
@@ -275,19 +324,28 @@ class _Routes:
 
     @staticmethod
     def preview_plan(
-        scene_id: str, x: float, y: float, yaw: float, as_of: int | None
+        scene_id: str,
+        x: float,
+        y: float,
+        yaw: float,
+        as_of: int | None,
+        as_of_time: WallTime | None = None,
     ) -> _Call[PlanOut]:
-        query = _query(x=x, y=y, yaw=yaw, as_of=as_of)
+        query = _query(x=x, y=y, yaw=yaw, as_of=as_of, as_of_time=_wall(as_of_time))
         return _Call("GET", f"{_scene(scene_id)}/plan", _model(PlanOut), query)
 
     @staticmethod
-    def occupancy(scene_id: str, as_of: int | None) -> _Call[Occupancy]:
-        query = _query(as_of=as_of, format="json")
+    def occupancy(
+        scene_id: str, as_of: int | None, as_of_time: WallTime | None = None
+    ) -> _Call[Occupancy]:
+        query = _query(as_of=as_of, as_of_time=_wall(as_of_time), format="json")
         return _Call("GET", f"{_scene(scene_id)}/occupancy", _model(Occupancy), query)
 
     @staticmethod
-    def occupancy_png(scene_id: str, as_of: int | None) -> _Call[bytes]:
-        query = _query(as_of=as_of, format="png")
+    def occupancy_png(
+        scene_id: str, as_of: int | None, as_of_time: WallTime | None = None
+    ) -> _Call[bytes]:
+        query = _query(as_of=as_of, as_of_time=_wall(as_of_time), format="png")
         return _Call(
             "GET", f"{_scene(scene_id)}/occupancy", lambda r: r.content, query, accept="image/png"
         )
@@ -467,12 +525,13 @@ class Client:
         scene_id: str,
         *,
         as_of: int | None = None,
+        as_of_time: WallTime | None = None,
         include: Literal["published", "all"] = "published",
         parent: str | None = None,
         label: str | None = None,
     ) -> Graph:
         """`GET .../graph`: the published graph (every track with include="all") at `as_of`."""
-        return self._send(_Routes.graph(scene_id, as_of, include, parent, label))
+        return self._send(_Routes.graph(scene_id, as_of, include, parent, label, as_of_time))
 
     def events_page(
         self,
@@ -537,9 +596,75 @@ class Client:
         """`GET .../tracks`: current tracks from the projection, filtered."""
         return self._send(_Routes.tracks(scene_id, label, state, parent))
 
-    def track(self, scene_id: str, track_id: str, *, as_of: int | None = None) -> TrackBelief:
+    def track(
+        self,
+        scene_id: str,
+        track_id: str,
+        *,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
+    ) -> TrackBelief:
         """`GET .../tracks/{track_id}`: the full belief of one track at `as_of`."""
-        return self._send(_Routes.track(scene_id, track_id, as_of))
+        return self._send(_Routes.track(scene_id, track_id, as_of, as_of_time))
+
+    def objects(
+        self,
+        scene_id: str,
+        *,
+        label: str | None = None,
+        near: tuple[float, float, float] | None = None,
+        radius: float | None = None,
+        on: str | None = None,
+        changed_since: int | None = None,
+        changed_since_time: WallTime | None = None,
+        state: str | None = None,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
+        limit: int = 100,
+        after: str | None = None,
+    ) -> ObjectPage:
+        """`GET .../objects`: one page of the scene's objects that match every filter, by
+        distance from `near` when given, else by track id."""
+        filters = {
+            "label": label,
+            "near": None if near is None else ",".join(repr(float(v)) for v in near),
+            "radius": radius,
+            "on": on,
+            "changed_since": changed_since,
+            "changed_since_time": _wall(changed_since_time),
+            "state": state,
+            "limit": limit,
+            "after": after,
+        }
+        return self._send(_Routes.objects(scene_id, filters, as_of, as_of_time))
+
+    def similar(
+        self,
+        scene_id: str,
+        embedding: Sequence[float],
+        *,
+        k: int = 5,
+        label: str | None = None,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
+    ) -> SimilarOut:
+        """`POST .../objects/similar`: the `k` objects that look most like `embedding`."""
+        body = SimilarIn(embedding=list(embedding), k=k, label=label)
+        return self._send(_Routes.similar(scene_id, body, as_of, as_of_time))
+
+    def history(
+        self,
+        scene_id: str,
+        track_id: str,
+        *,
+        after: int = -1,
+        limit: int = 100,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
+    ) -> TrackHistory:
+        """`GET .../tracks/{track_id}/history`: where the track was and on what, as spans."""
+        call = _Routes.history(scene_id, track_id, after, limit, as_of, as_of_time)
+        return self._send(call)
 
     def explain(self, scene_id: str, track_id: str, *, events: bool = False) -> Explanation:
         """`GET .../tracks/{track_id}/explain`: why the track is in its state, from the log (its
@@ -593,18 +718,29 @@ class Client:
         return self._send(_Routes.plan(scene_id, robot_pose))
 
     def preview_plan(
-        self, scene_id: str, x: float, y: float, yaw: float = 0.0, *, as_of: int | None = None
+        self,
+        scene_id: str,
+        x: float,
+        y: float,
+        yaw: float = 0.0,
+        *,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
     ) -> PlanOut:
         """`GET .../plan`: the plan at `as_of` for a robot at (x, y, yaw), without locking."""
-        return self._send(_Routes.preview_plan(scene_id, x, y, yaw, as_of))
+        return self._send(_Routes.preview_plan(scene_id, x, y, yaw, as_of, as_of_time))
 
-    def occupancy(self, scene_id: str, *, as_of: int | None = None) -> Occupancy:
+    def occupancy(
+        self, scene_id: str, *, as_of: int | None = None, as_of_time: WallTime | None = None
+    ) -> Occupancy:
         """`GET .../occupancy`: the occupancy map A_t at `as_of`, run-length encoded."""
-        return self._send(_Routes.occupancy(scene_id, as_of))
+        return self._send(_Routes.occupancy(scene_id, as_of, as_of_time))
 
-    def occupancy_png(self, scene_id: str, *, as_of: int | None = None) -> bytes:
+    def occupancy_png(
+        self, scene_id: str, *, as_of: int | None = None, as_of_time: WallTime | None = None
+    ) -> bytes:
         """`GET .../occupancy?format=png`: the map as an 8-bit grey PNG."""
-        return self._send(_Routes.occupancy_png(scene_id, as_of))
+        return self._send(_Routes.occupancy_png(scene_id, as_of, as_of_time))
 
 
 class AsyncClient:
@@ -723,12 +859,13 @@ class AsyncClient:
         scene_id: str,
         *,
         as_of: int | None = None,
+        as_of_time: WallTime | None = None,
         include: Literal["published", "all"] = "published",
         parent: str | None = None,
         label: str | None = None,
     ) -> Graph:
         """`GET .../graph`."""
-        return await self._send(_Routes.graph(scene_id, as_of, include, parent, label))
+        return await self._send(_Routes.graph(scene_id, as_of, include, parent, label, as_of_time))
 
     async def events_page(
         self,
@@ -789,9 +926,75 @@ class AsyncClient:
         """`GET .../tracks`."""
         return await self._send(_Routes.tracks(scene_id, label, state, parent))
 
-    async def track(self, scene_id: str, track_id: str, *, as_of: int | None = None) -> TrackBelief:
+    async def track(
+        self,
+        scene_id: str,
+        track_id: str,
+        *,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
+    ) -> TrackBelief:
         """`GET .../tracks/{track_id}`."""
-        return await self._send(_Routes.track(scene_id, track_id, as_of))
+        return await self._send(_Routes.track(scene_id, track_id, as_of, as_of_time))
+
+    async def objects(
+        self,
+        scene_id: str,
+        *,
+        label: str | None = None,
+        near: tuple[float, float, float] | None = None,
+        radius: float | None = None,
+        on: str | None = None,
+        changed_since: int | None = None,
+        changed_since_time: WallTime | None = None,
+        state: str | None = None,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
+        limit: int = 100,
+        after: str | None = None,
+    ) -> ObjectPage:
+        """`GET .../objects`: one page of the scene's objects that match every filter, by
+        distance from `near` when given, else by track id."""
+        filters = {
+            "label": label,
+            "near": None if near is None else ",".join(repr(float(v)) for v in near),
+            "radius": radius,
+            "on": on,
+            "changed_since": changed_since,
+            "changed_since_time": _wall(changed_since_time),
+            "state": state,
+            "limit": limit,
+            "after": after,
+        }
+        return await self._send(_Routes.objects(scene_id, filters, as_of, as_of_time))
+
+    async def similar(
+        self,
+        scene_id: str,
+        embedding: Sequence[float],
+        *,
+        k: int = 5,
+        label: str | None = None,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
+    ) -> SimilarOut:
+        """`POST .../objects/similar`: the `k` objects that look most like `embedding`."""
+        body = SimilarIn(embedding=list(embedding), k=k, label=label)
+        return await self._send(_Routes.similar(scene_id, body, as_of, as_of_time))
+
+    async def history(
+        self,
+        scene_id: str,
+        track_id: str,
+        *,
+        after: int = -1,
+        limit: int = 100,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
+    ) -> TrackHistory:
+        """`GET .../tracks/{track_id}/history`: where the track was and on what, as spans."""
+        call = _Routes.history(scene_id, track_id, after, limit, as_of, as_of_time)
+        return await self._send(call)
 
     async def explain(self, scene_id: str, track_id: str, *, events: bool = False) -> Explanation:
         """`GET .../tracks/{track_id}/explain`."""
@@ -842,15 +1045,26 @@ class AsyncClient:
         return await self._send(_Routes.plan(scene_id, robot_pose))
 
     async def preview_plan(
-        self, scene_id: str, x: float, y: float, yaw: float = 0.0, *, as_of: int | None = None
+        self,
+        scene_id: str,
+        x: float,
+        y: float,
+        yaw: float = 0.0,
+        *,
+        as_of: int | None = None,
+        as_of_time: WallTime | None = None,
     ) -> PlanOut:
         """`GET .../plan`."""
-        return await self._send(_Routes.preview_plan(scene_id, x, y, yaw, as_of))
+        return await self._send(_Routes.preview_plan(scene_id, x, y, yaw, as_of, as_of_time))
 
-    async def occupancy(self, scene_id: str, *, as_of: int | None = None) -> Occupancy:
+    async def occupancy(
+        self, scene_id: str, *, as_of: int | None = None, as_of_time: WallTime | None = None
+    ) -> Occupancy:
         """`GET .../occupancy`."""
-        return await self._send(_Routes.occupancy(scene_id, as_of))
+        return await self._send(_Routes.occupancy(scene_id, as_of, as_of_time))
 
-    async def occupancy_png(self, scene_id: str, *, as_of: int | None = None) -> bytes:
+    async def occupancy_png(
+        self, scene_id: str, *, as_of: int | None = None, as_of_time: WallTime | None = None
+    ) -> bytes:
         """`GET .../occupancy?format=png`."""
-        return await self._send(_Routes.occupancy_png(scene_id, as_of))
+        return await self._send(_Routes.occupancy_png(scene_id, as_of, as_of_time))

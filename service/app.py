@@ -26,6 +26,7 @@ from service.routes import (
     events,
     graph,
     inspections,
+    objects,
     plan,
     scenes,
     tracks,
@@ -86,7 +87,18 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.add_middleware(UnexpectedErrors)  # a 500 keeps the connection
     app.add_middleware(ContentTypeOptions)  # nosniff on every answer, a 500 included
     app.add_middleware(RequestLog)  # outermost: every answer logged, with its scene and batch
-    routers = (scenes, batches, graph, events, tracks, verifications, baselines, inspections, plan)
+    routers = (
+        scenes,
+        batches,
+        graph,
+        events,
+        tracks,
+        objects,
+        verifications,
+        baselines,
+        inspections,
+        plan,
+    )
     for module in routers:
         app.include_router(module.router)
 

@@ -2,22 +2,32 @@
 
 from __future__ import annotations
 
+from datetime import datetime
 from typing import Annotated, Any
 
 from fastapi import Depends, Path, Query, Request
+from fastapi.exceptions import RequestValidationError
+from pydantic import (
+    AwareDatetime,
+    Field,
+    ValidationError,
+    ValidatorFunctionWrapHandler,
+    WrapValidator,
+)
 
 from api_schema.requests import PRINTABLE
 from service.bootstrap import Container
 from service.feed import StreamSlots
 from service.settings import Settings
 from service.states import StateReader
-from service.store.errors import SceneQuarantined
+from service.store.errors import SceneQuarantined, SeqOutOfRange
 from service.store.event_log import SceneRecord
 from service.store.notifications import Wakeups
 from service.store.queue_records import Admission
 
 # Largest integer a query or path may carry: the databases store 64-bit signed integers.
 MAX_INT = 2**53 - 1  # integers a JSON number carries exactly
+MAX_TIMESTAMP = 1e11  # seconds either side of 1970, as a frame's timestamp (api_schema)
 
 
 def get_container(request: Request) -> Container:
@@ -87,6 +97,69 @@ def text_query(description: str, max_length: int = 200) -> Any:
     return Query(max_length=max_length, pattern=PRINTABLE, description=description)
 
 
-AsOf = Annotated[
+SeqQuery = Annotated[
     int | None, Query(ge=0, le=MAX_INT, description="Seq to travel back to (default: the head).")
 ]
+
+
+def _one_reason(value: Any, handler: ValidatorFunctionWrapHandler) -> Any:
+    """One reason for a time that is neither form (not one per member of the union)."""
+    try:
+        return handler(value)
+    except ValidationError:
+        raise ValueError(
+            "ISO 8601 with a timezone (2026-12-03T10:15:00Z) or unix seconds, finite, "
+            f"within +-{MAX_TIMESTAMP:g}"
+        ) from None
+
+
+# A time on the robot's clock: unix seconds (the frames' range), or ISO 8601 with a timezone.
+WallTime = Annotated[
+    Annotated[float, Field(ge=-MAX_TIMESTAMP, le=MAX_TIMESTAMP, allow_inf_nan=False)]
+    | AwareDatetime,
+    WrapValidator(_one_reason),
+]
+TimeQuery = Annotated[
+    WallTime | None,
+    Query(
+        description="Wall-clock time to travel back to, on the robot's clock (its frames' "
+        "timestamps): ISO 8601 with a timezone (`2026-12-03T10:15:00Z`) or unix seconds "
+        "(`1796292900.5`). The state after the last batch whose newest frame is at or before "
+        "it; 404 before the scene's first batch. Not with `as_of`.",
+    ),
+]
+
+
+def invalid_input(field: str, reason: str, where: str = "query") -> RequestValidationError:
+    """A 422 naming `field` of the query (or the body), as FastAPI's own validation answers."""
+    return RequestValidationError([{"type": "value_error", "loc": (where, field), "msg": reason}])
+
+
+def seconds(value: float | datetime) -> float:
+    """Unix seconds of a WallTime."""
+    return value.timestamp() if isinstance(value, datetime) else float(value)
+
+
+def resolve_as_of(
+    scene: AnySceneDep,
+    container: ContainerDep,
+    as_of: SeqQuery = None,
+    as_of_time: TimeQuery = None,
+) -> int | None:
+    """The seq a read travels back to: `as_of`, or the last seq a batch appended at or before
+    `as_of_time` on the robot's clock; None for the head."""
+    if as_of_time is None:
+        return as_of
+    if as_of is not None:
+        raise invalid_input("as_of_time", "give as_of or as_of_time, not both")
+    at = seconds(as_of_time)
+    seq = container.log.seq_at_time(scene.id, at)
+    if seq is None:
+        raise SeqOutOfRange(
+            f"no batch of scene {scene.id!r} is at or before {at:.3f} s", "as_of_time"
+        )
+    return seq
+
+
+# The seq to read at: `as_of` or `as_of_time` (both: 422), None for the head.
+AsOf = Annotated[int | None, Depends(resolve_as_of)]

@@ -174,7 +174,13 @@ class Worker:
                     state = self._state(claim.scene_id)
                     events = decide(state, batch)
                 with metrics.timed(metrics.append_seconds), container.uow.begin() as work:
-                    appended = work.append(claim.scene_id, state, events, batch_id=claim.batch_id)
+                    appended = work.append(
+                        claim.scene_id,
+                        state,
+                        events,
+                        batch_id=claim.batch_id,
+                        batch_time=max(frame.timestamp for frame in batch.frames),
+                    )
                     work.complete(claim, appended.seqs)
         except LeaseLost:
             self._states.pop(claim.scene_id, None)

@@ -30,7 +30,7 @@ router = APIRouter(prefix="/v1/scenes/{scene_id}", tags=["graph"])
 def get_graph(
     scene: SceneDep,
     states: StatesDep,
-    as_of: AsOf = None,
+    as_of: AsOf,
     include: Annotated[
         Literal["published", "all"],
         Query(description="`all` adds hypotheses, demoted and removed tracks."),

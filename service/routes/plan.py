@@ -39,7 +39,7 @@ def get_occupancy(
     scene: SceneDep,
     states: StatesDep,
     request: Request,
-    as_of: AsOf = None,
+    as_of: AsOf,
     format: Annotated[
         Literal["json", "png"] | None,
         Query(description="`png` for an 8-bit grey image (default: by the Accept header)."),
@@ -82,10 +82,10 @@ def post_plan(scene: SceneDep, body: PlanIn, container: ContainerDep) -> PlanOut
 def preview_plan(
     scene: SceneDep,
     states: StatesDep,
+    as_of: AsOf,
     x: Annotated[float, Query(ge=-200, le=200, allow_inf_nan=False, description="Metres.")],
     y: Annotated[float, Query(ge=-200, le=200, allow_inf_nan=False, description="Metres.")],
     yaw: Annotated[float, Query(ge=-10, le=10, allow_inf_nan=False, description="Radians.")] = 0.0,
-    as_of: AsOf = None,
 ) -> PlanOut:
     """The plan the robot at (x, y, yaw) would get at `as_of` (default now), without locking."""
     state = states.state(scene.id, as_of)

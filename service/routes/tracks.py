@@ -33,9 +33,7 @@ def list_tracks(
 
 
 @router.get("/{track_id}", response_model=TrackBelief)
-def get_track(
-    scene: SceneDep, track_id: TrackId, states: StatesDep, as_of: AsOf = None
-) -> TrackBelief:
+def get_track(scene: SceneDep, track_id: TrackId, states: StatesDep, as_of: AsOf) -> TrackBelief:
     """The full belief of one track at `as_of` (default now)."""
     state = states.state(scene.id, as_of)
     track = state.tracks.get(track_id)

@@ -46,10 +46,11 @@ POSTGRES_APPEND = sa.text(
         RETURNING head_seq
     )
     INSERT INTO events
-        (scene_id, seq, type, track_id, state, batch_id, frame_id, recorded_at, details)
+        (scene_id, seq, type, track_id, state, batch_id, frame_id, recorded_at, details,
+        batch_time)
     SELECT CAST(:scene_id AS text), CAST(:expected AS bigint) + row.n, row.type, row.track_id,
         row.state, CAST(:batch_id AS text), row.frame_id, CAST(:recorded_at AS double precision),
-        row.details
+        row.details, CAST(:batch_time AS double precision)
     FROM head, unnest(
         CAST(:types AS text[]), CAST(:track_ids AS text[]), CAST(:states AS text[]),
         CAST(:frame_ids AS text[]), CAST(:detailss AS text[])
@@ -65,6 +66,7 @@ def insert_rows(
     rows: Sequence[dict[str, Any]],
     batch_id: str | None,
     now: float,
+    batch_time: float | None = None,
 ) -> None:
     """Move the scene's head from `expected_head` past the rows and insert them, inside the
     caller's write transaction; ConcurrencyConflict (nothing written) when the head moved."""
@@ -80,6 +82,7 @@ def insert_rows(
                 "count": count,
                 "batch_id": batch_id,
                 "recorded_at": now,
+                "batch_time": batch_time,
                 **{f"{column}s": [row[column] for row in rows] for column in ARRAY_COLUMNS},
             },
         ).rowcount

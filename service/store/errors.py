@@ -55,10 +55,10 @@ class SceneNotFound(NotFound):
 
 
 class SeqOutOfRange(Refused):
-    """as_of beyond the scene's head."""
+    """as_of beyond the scene's head, or an as_of_time before its first batch."""
 
-    def __init__(self, detail: str) -> None:
-        super().__init__(detail, "as_of")
+    def __init__(self, detail: str, field: str = "as_of") -> None:
+        super().__init__(detail, field)
 
 
 class UnreadableEvent(Refused):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 import uuid
 from collections.abc import Iterable, Iterator, Sequence
@@ -66,6 +67,7 @@ class StoredEvent:
     frame_id: str | None
     recorded_at: float
     details: dict[str, Any]
+    batch_time: float | None = None  # the robot's clock of the batch that appended it
 
     def to_core(self) -> Event:
         """The typed core event (UnreadableEvent when the row cannot be one)."""
@@ -94,6 +96,7 @@ def _stored(scene_id: str, row: sa.Row[Any]) -> StoredEvent:
         row.frame_id,
         row.recorded_at,
         details,
+        row.batch_time,
     )
 
 
@@ -157,7 +160,9 @@ class EventLog:
             )
         )
         created = SceneCreated(name=name, params=params.to_dict(), baseline=baseline)
-        connection.execute(events.insert(), [self._event_row(scene_id, 0, created, None, now)])
+        connection.execute(
+            events.insert(), [self._event_row(scene_id, 0, created, None, now, None)]
+        )
         return SceneRecord(scene_id, name, params.to_dict(), 0, now, None), created
 
     def scene(self, scene_id: str, connection: sa.Connection | None = None) -> SceneRecord:
@@ -188,7 +193,13 @@ class EventLog:
     # -- the log ------------------------------------------------------------------------------
 
     def _event_row(
-        self, scene_id: str, seq: int, event: Event, batch_id: str | None, now: float
+        self,
+        scene_id: str,
+        seq: int,
+        event: Event,
+        batch_id: str | None,
+        now: float,
+        batch_time: float | None,
     ) -> dict[str, Any]:
         details = event.details()
         bad = non_finite_field(details)
@@ -208,6 +219,7 @@ class EventLog:
             "frame_id": event.frame_id,
             "recorded_at": now,
             "details": orjson.dumps(details).decode(),
+            "batch_time": batch_time,
         }
 
     def append(
@@ -217,21 +229,25 @@ class EventLog:
         expected_head: int,
         new_events: Sequence[Event],
         batch_id: str | None = None,
+        batch_time: float | None = None,
     ) -> tuple[int, int] | None:
         """Append inside the caller's write transaction; (first_seq, last_seq), None if no events.
+        `batch_time` is the robot's clock of the batch that decided them (its newest frame).
 
         The conditional head update serializes writers of one scene until commit; a rollback
         leaves no gap; zero rows updated means somebody else appended first.
         """
         if not new_events:
             return None
+        if batch_time is not None and not math.isfinite(batch_time):
+            raise NonFiniteEvent("batch_time is not finite; nothing was appended", "batch_time")
         count = len(new_events)
         now = self.clock()
         rows = [
-            self._event_row(scene_id, expected_head + 1 + i, event, batch_id, now)
+            self._event_row(scene_id, expected_head + 1 + i, event, batch_id, now, batch_time)
             for i, event in enumerate(new_events)
         ]  # before any write: a non-finite number stops the append here
-        insert_rows(connection, scene_id, expected_head, rows, batch_id, now)
+        insert_rows(connection, scene_id, expected_head, rows, batch_id, now, batch_time)
         notify_appended(connection, scene_id)  # PostgreSQL: wakes the event streams at commit
         return expected_head + 1, expected_head + count
 
@@ -264,6 +280,35 @@ class EventLog:
         else:
             rows = connection.execute(query).all()
         return [_stored(scene_id, row) for row in rows]
+
+    def seq_at_time(self, scene_id: str, at: float) -> int | None:
+        """The last seq appended by a batch whose time (the robot's clock, `batch_time`) is at
+        or before `at`; None when no batch is. One index seek while the clock only moves
+        forward; a clock that stepped back costs a scan of the earlier times' index entries."""
+        query = sa.select(sa.func.max(events.c.seq)).where(
+            events.c.scene_id == scene_id, events.c.batch_time <= at
+        )
+        with read_transaction(self.engine) as connection:
+            seq = connection.execute(query).scalar()
+        return None if seq is None else int(seq)
+
+    def last_changes(self, scene_id: str, track_ids: Sequence[str], up_to: int) -> dict[str, int]:
+        """The seq of each track's last event at or before `up_to` (one index range per track)."""
+        found: dict[str, int] = {}
+        with read_transaction(self.engine) as connection:
+            for start in range(0, len(track_ids), 500):
+                chunk = list(track_ids[start : start + 500])
+                rows = connection.execute(
+                    sa.select(events.c.track_id, sa.func.max(events.c.seq))
+                    .where(
+                        events.c.scene_id == scene_id,
+                        events.c.track_id.in_(chunk),
+                        events.c.seq <= up_to,
+                    )
+                    .group_by(events.c.track_id)
+                ).all()
+                found.update({str(track): int(seq) for track, seq in rows})
+        return found
 
     def iter_events(
         self, scene_id: str, *, after: int = -1, up_to: int | None = None

@@ -33,8 +33,13 @@ events = sa.Table(
     sa.Column("frame_id", sa.String(200)),
     sa.Column("recorded_at", sa.Float, nullable=False),
     sa.Column("details", sa.Text, nullable=False),  # orjson: exact float round trip
+    # The robot's clock: the newest frame timestamp of the batch that appended the row (unix
+    # seconds), for `as_of_time`. NULL on rows no batch appended (scene creation, commands)
+    # and on rows stored before the column existed (migration 0007).
+    sa.Column("batch_time", sa.Float),
 )
 sa.Index("ix_events_scene_track_seq", events.c.scene_id, events.c.track_id, events.c.seq)
+sa.Index("ix_events_scene_batch_time", events.c.scene_id, events.c.batch_time, events.c.seq)
 
 # The job queue: one row per accepted batch.
 batches = sa.Table(

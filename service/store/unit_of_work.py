@@ -125,13 +125,17 @@ class Writes:
         events: Sequence[Event],
         *,
         batch_id: str | None = None,
+        batch_time: float | None = None,
     ) -> Appended:
-        """Append `events` decided on `state` (its head is the expected head) and project them.
+        """Append `events` decided on `state` (its head is the expected head) and project them;
+        a batch's events carry its `batch_time` (the robot's clock: its newest frame).
 
         ConcurrencyConflict when the head moved; NonFiniteEvent when an event holds NaN or
         infinity. Either way the transaction rolls back and nothing is stored.
         """
-        seqs = self.unit.log.append(self.connection, scene_id, state.head_seq, events, batch_id)
+        seqs = self.unit.log.append(
+            self.connection, scene_id, state.head_seq, events, batch_id, batch_time
+        )
         after = fold(state, events)
         if seqs is not None:
             self.events_appended += seqs[1] - seqs[0] + 1

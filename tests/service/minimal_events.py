@@ -93,9 +93,14 @@ def missed(track_id: str, logodds: float, misses: int) -> VisibleMiss:
 
 
 def append_batch(
-    container: Container, scene_id: str, events: Sequence[Event], batch_id: str | None = None
+    container: Container,
+    scene_id: str,
+    events: Sequence[Event],
+    batch_id: str | None = None,
+    batch_time: float | None = None,
 ) -> tuple[int, int] | None:
-    """Append at the current head through the one write path, as the worker does."""
+    """Append at the current head through the one write path, as the worker does (with the
+    batch's time on the robot's clock when given)."""
     state = container.log.load_state(scene_id)
     with container.uow.begin() as work:
-        return work.append(scene_id, state, events, batch_id=batch_id).seqs
+        return work.append(scene_id, state, events, batch_id=batch_id, batch_time=batch_time).seqs
