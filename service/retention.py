@@ -49,6 +49,7 @@ from core.graph import pending_verifications
 from core.planner import unresolved_fixtures
 from pbdag_errors import Refused
 from service.bootstrap import Container
+from service.store.blobs import ORPHAN_GRACE_SECONDS
 from service.store.engine import read_transaction
 from service.store.queue_records import BatchRecord
 from service.store.tables import batches
@@ -133,8 +134,6 @@ def collect(
     return report
 
 
-# A blob no row names may be a batch's being queued now (the folder writes it before the row).
-ORPHAN_GRACE_SECONDS = 3600.0
 SWEEP_CHUNK = 500
 
 

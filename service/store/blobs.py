@@ -52,6 +52,11 @@ class RawBatchMissing(StoreError):
         super().__init__(f"batch {batch_id!r}: its raw body (blob {key}) is missing", "batch_id")
 
 
+# A blob no row names may be a batch's being queued now (the folder writes it before the row,
+# and a put of bytes already stored refreshes the file's time): it is deleted only this old.
+ORPHAN_GRACE_SECONDS = 3600.0
+
+
 class BlobStore(Protocol):
     """Put bytes, get them back by their sha256, delete them, list the keys.
 

@@ -8,8 +8,10 @@ whatever their status, and its scene row. What it leaves is consistent: no row n
 The raw batch blobs go too, those that no other scene's batch row names (`pbdag repair` copies
 a batch's row into the repaired scene with the same blob): PostgreSQL's blob table in the same
 transaction, a folder's files after the commit (a file deleted before the commit could be
-needed by a rollback). A file the folder cannot delete then is left to `pbdag gc`, whose sweep
-deletes blobs no row names (service/retention.py).
+needed by a rollback), those no put touched within `ORPHAN_GRACE_SECONDS`: a batch of another
+scene with the same bytes may be being queued (the folder writes the file, or refreshes its
+time, before the row commits). A younger file, or one the folder cannot delete, is left to
+`pbdag gc`, whose sweep deletes blobs no row names once they are as old (service/retention.py).
 
 Writers of the scene meet a scene that is gone: the scene row is locked first, so an append
 that was waiting for it finds no head to move (`ConcurrencyConflict`), and a worker's fenced
@@ -25,18 +27,20 @@ source scene again.
 from __future__ import annotations
 
 import logging
+import time
 from dataclasses import dataclass
 
 import sqlalchemy as sa
 
-from service.store.blobs import BlobStore
-from service.store.engine import write_transaction
+from service.store.blobs import ORPHAN_GRACE_SECONDS, BlobStore
+from service.store.engine import read_transaction, write_transaction
 from service.store.errors import SceneNotFound, StoreUnavailable
 from service.store.tables import baselines, batches, events, scenes, snapshots, tracks
 
 logger = logging.getLogger("pbdag.store")
 
 CHUNK = 500  # keys per IN (...) list
+clock = time.time  # when the files are judged (a test moves it on)
 
 
 @dataclass(frozen=True)
@@ -77,7 +81,7 @@ def delete_scene(engine: sa.Engine, blobs: BlobStore, scene_id: str) -> SceneDel
         if blobs.joins_transaction:
             deleted = [key for key in unnamed if blobs.delete(key, connection)]
     if not blobs.joins_transaction:
-        deleted = [key for key in unnamed if _delete_file(blobs, key)]
+        deleted = _delete_files(engine, blobs, unnamed)
     return SceneDeletion(
         scene_id=scene_id,
         events=removed["events"],
@@ -113,6 +117,26 @@ def _still_named(connection: sa.Connection, keys: list[str]) -> set[str]:
             ).scalars()
         )
     return named
+
+
+def _delete_files(engine: sa.Engine, blobs: BlobStore, keys: list[str]) -> list[str]:
+    """After the commit: the files no row names now and no put touched within the grace. A
+    batch of another scene with the same bytes may be being queued at this moment (its put
+    writes or refreshes the file before its row commits); such a file, and any younger one, is
+    left to `pbdag gc`'s sweep, which applies the same grace."""
+    if not keys:
+        return []
+    with read_transaction(engine) as connection:
+        named = _still_named(connection, keys)
+    cutoff = clock() - ORPHAN_GRACE_SECONDS
+    deleted = []
+    for key in keys:
+        stored = blobs.stored_at(key)
+        if key in named or stored is None or stored >= cutoff:
+            continue
+        if _delete_file(blobs, key):
+            deleted.append(key)
+    return deleted
 
 
 def _delete_file(blobs: BlobStore, key: str) -> bool:
