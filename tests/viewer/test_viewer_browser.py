@@ -237,6 +237,14 @@ def test_slider_explanation_and_verdict_in_the_browser(demo: DemoScene, browsed:
     assert page.locator("#events li").count() > 0
     assert page.locator(f'#events li[data-seq="{demo.head}"]').count() == 1
     shot(page, "1-head")
+    page.fill("#search", "sofa")  # a question: none at this seq
+    page.click("#search-form button")
+    expect(page.locator("#search-results")).to_contain_text(f"No sofa at seq {demo.head}")
+    page.fill("#search", "mug")  # the removed mug is still an answer, with its parent
+    page.click("#search-form button")
+    found = page.locator(f'#search-results li[data-track="{demo.mug_id}"]')
+    expect(found).to_contain_text("removed p=")
+    assert demo.table_id in (found.text_content() or "")
 
     # Before the removal the mug is back, confirmed on the table.
     before = demo.last_published

@@ -576,6 +576,33 @@ function trackAt(event) {
 
 // --- one track -------------------------------------------------------------------------------
 
+// --- questions: the objects of a class, at the seq shown ---------------------------------------
+
+async function findObjects(label) {
+  const results = $("search-results");
+  if (!view.sceneId || !label) {
+    results.replaceChildren();
+    return;
+  }
+  const seq = view.seq;
+  const query = new URLSearchParams({ label, as_of: String(seq), limit: "50" });
+  const page = await api(scenePath(`/objects?${query}`));
+  results.dataset.seq = String(page.seq);
+  if (!page.objects.length) {
+    results.replaceChildren(el("li", { className: "hint" }, `No ${label} at seq ${page.seq}.`));
+    return;
+  }
+  results.replaceChildren(...page.objects.map((object) => el(
+    "li",
+    { dataset: { track: object.track_id }, onclick: () => selectTrack(object.track_id) },
+    `${object.label} `,
+    el("span", { className: "track-id" }, `${object.track_id} `),
+    el("span", { className: "state" }, `${object.state} p=${fixed(object.p_exist)}`),
+    object.parent ? ` on ${object.parent_label} (${object.parent})` : " on no fixture",
+    object.last_observed_frame ? ` · last seen in ${object.last_observed_frame}` : "",
+  )));
+}
+
 async function selectTrack(trackId) {
   view.selected = trackId;
   for (const item of $("tracks").children) {
@@ -681,6 +708,10 @@ let sliderTimer = null;
 
 function start() {
   $("token").value = token();
+  $("search-form").addEventListener("submit", (event) => {
+    event.preventDefault();
+    findObjects($("search").value.trim()).catch(failed);
+  });
   $("token-form").addEventListener("submit", (event) => {
     event.preventDefault();
     sessionStorage.setItem("pbdag-token", $("token").value.trim());
