@@ -14,8 +14,8 @@ import pytest
 from fastapi.testclient import TestClient
 
 from service.bootstrap import Container
-from service.retention import ORPHAN_GRACE_SECONDS, collect
-from service.store.blobs import BlobNotFound, FileBlobStore
+from service.retention import collect
+from service.store.blobs import ORPHAN_GRACE_SECONDS, BlobNotFound, FileBlobStore
 from service.worker import Worker
 from tests.service.invariants import blobs_agree_with_rows, projections_equal_a_replay
 from tests.wire_scenes import batch
