@@ -3,16 +3,12 @@ on a temporary SQLite store; and a scene the simulated robot's stream has filled
 
 from __future__ import annotations
 
-import socket
-import threading
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-import uvicorn
 
 from api_schema import BatchIn, BatchStatus
 from pbdag_client import Client
@@ -20,6 +16,7 @@ from service.app import create_app
 from service.bootstrap import Container, build_container
 from service.settings import Settings
 from tests.eval_extra import require_eval_extra
+from tests.live_server import served
 
 # 40 frames of the demo room: fixtures confirmed, objects on them, verdicts waited for.
 STREAM_FRAMES = 40
@@ -37,30 +34,10 @@ class Service:
 def serving(settings: Settings) -> Iterator[Service]:
     """The API and its worker served by uvicorn on 127.0.0.1 (a free port) until the block ends."""
     container = build_container(settings)
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.bind(("127.0.0.1", 0))
-    port = int(sock.getsockname()[1])
-    server = uvicorn.Server(
-        uvicorn.Config(
-            create_app(container, run_worker=True),
-            host="127.0.0.1",
-            port=port,
-            log_level="warning",
-            ws="none",
-        )
-    )
-    thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-    thread.start()
-    deadline = time.monotonic() + 30
-    while not server.started:
-        assert thread.is_alive() and time.monotonic() < deadline, "the service did not start"
-        time.sleep(0.02)
     try:
-        yield Service(f"http://127.0.0.1:{port}", container)
+        with served(create_app(container, run_worker=True)) as url:
+            yield Service(url, container)
     finally:
-        server.should_exit = True
-        thread.join(timeout=30)
-        sock.close()
         container.engine.dispose()
 
 
