@@ -14,9 +14,9 @@ object's.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -100,7 +100,7 @@ def batch_visibility(
     for frame in frames:
         rows = in_view_rows(centers, extents, frame, params.visibility)
         rows = rows[live[rows]]
-        sightings = samples_passed(
+        columns = sample_columns(
             centers[rows],
             extents[rows],
             frame,
@@ -109,14 +109,12 @@ def batch_visibility(
             rules.miss_evidence,
             probes=arrays.centers[rows],
         )
-        for row, sighting in zip(rows.tolist(), sightings, strict=True):
-            if sighting.passed == 0:
-                continue
+        for sighting, row in _sightings(columns, rows, frame.frame_id):
             track_id = arrays.track_ids[row]
             held = best.get(track_id)
             rank = _rank(sighting, params.visibility, rules.visibility_gate)
             if held is None or rank > _rank(held, params.visibility, rules.visibility_gate):
-                best[track_id] = sighting.seen_in(frame.frame_id)
+                best[track_id] = sighting
         shown.append(frozenset(t for t, s in best.items() if observable(s, params.visibility)))
     visible = frozenset(
         t for t, s in best.items() if observable(s, params.visibility, rules.visibility_gate)
@@ -143,6 +141,22 @@ def in_view_rows(
     )
 
 
+def _sightings(
+    columns: SampleColumns, rows: npt.NDArray[np.intp], frame_id: str
+) -> Iterator[tuple[Sighting, int]]:
+    """The sightings of the boxes with a sample passed, each with its row, naming the frame."""
+    shown = np.flatnonzero(columns.passed)
+    for index, row in zip(shown.tolist(), rows[shown].tolist(), strict=True):
+        sighting = Sighting(
+            int(columns.passed[index]),
+            float(columns.fraction[index]),
+            float(columns.in_image_share[index]),
+            bool(columns.empty[index]),
+            frame_id,
+        )
+        yield sighting, row
+
+
 def samples_passed(
     centers: FloatArray,
     extents: FloatArray,
@@ -152,6 +166,36 @@ def samples_passed(
     miss_evidence: MissEvidence = "visible",
     probes: FloatArray | None = None,
 ) -> list[Sighting]:
+    """For each stored box: its samples that pass in `frame`, and its observable image share
+    (`sample_columns`, one sighting per box)."""
+    columns = sample_columns(centers, extents, frame, params, occlusion_test, miss_evidence, probes)
+    return [
+        Sighting(int(p), float(f), float(i), bool(e))
+        for p, f, i, e in zip(
+            columns.passed, columns.fraction, columns.in_image_share, columns.empty, strict=True
+        )
+    ]
+
+
+class SampleColumns(NamedTuple):
+    """Per stored box: samples passed, observable image share, share in the image, and
+    whether the place is seen empty (one array each)."""
+
+    passed: npt.NDArray[np.intp]
+    fraction: FloatArray
+    in_image_share: FloatArray
+    empty: npt.NDArray[np.bool_]
+
+
+def sample_columns(
+    centers: FloatArray,
+    extents: FloatArray,
+    frame: Frame,
+    params: VisibilityParams,
+    occlusion_test: bool = True,
+    miss_evidence: MissEvidence = "visible",
+    probes: FloatArray | None = None,
+) -> SampleColumns:
     """For each stored box: its samples that pass in `frame`, and its observable image share.
 
     Whether the place is seen empty is tested along the ray to each box's `probes` point (the
@@ -164,7 +208,7 @@ def samples_passed(
     """
     count = centers.shape[0]
     if count == 0:
-        return []
+        return SampleColumns(np.zeros(0, np.intp), np.zeros(0), np.zeros(0), np.zeros(0, np.bool_))
     per_track = params.box_samples_per_axis**3
     samples = world_to_camera(
         box_samples(centers, extents, params.box_samples_per_axis).reshape(-1, 3), frame.pose
@@ -206,10 +250,7 @@ def samples_passed(
         empty = _center_empty(centers if probes is None else probes, frame, params)
     else:
         empty = np.ones(count, dtype=np.bool_)
-    return [
-        Sighting(int(p), float(f), float(i), bool(e))
-        for p, f, i, e in zip(passed, fraction, in_image_share, empty, strict=True)
-    ]
+    return SampleColumns(passed, fraction, in_image_share, empty)
 
 
 def _center_empty(
@@ -258,19 +299,30 @@ def _window_depth(
     v: npt.NDArray[np.intp],
     params: VisibilityParams,
 ) -> FloatArray:
-    """Median of the valid depths in the window around each pixel; 0 where none is valid."""
+    """Median of the valid depths in the window around each pixel; 0 where none is valid.
+
+    A window reaching past the image's edge repeats the edge's pixels (the coordinates are
+    clipped); windows wholly inside are read by flat offsets, with no clipping to pay.
+    """
     half = params.depth_window_px // 2
-    offsets = np.arange(-half, half + 1)
     height, width = depth.shape
-    rows = np.clip(v[:, None, None] + offsets[None, :, None], 0, height - 1)
-    cols = np.clip(u[:, None, None] + offsets[None, None, :], 0, width - 1)
-    window = depth[rows, cols].reshape(len(u), -1).astype(np.float64)
-    valid = (window >= params.min_range_m) & (window <= params.max_range_m)
+    offsets = np.arange(-half, half + 1)
+    flat = (v * width + u)[:, None] + (offsets[:, None] * width + offsets[None, :]).ravel()
+    edge = np.flatnonzero((u < half) | (u >= width - half) | (v < half) | (v >= height - half))
+    if edge.size:
+        rows = np.clip(v[edge, None] + offsets[None, :], 0, height - 1) * width
+        cols = np.clip(u[edge, None] + offsets[None, :], 0, width - 1)
+        flat[edge] = (rows[:, :, None] + cols[:, None, :]).reshape(edge.size, -1)
+    window = depth.reshape(-1)[flat]
+    # Compared as float64 (the limits are), sorted in the image's own precision: the values and
+    # their order are the same.
+    low, high = np.float64(params.min_range_m), np.float64(params.max_range_m)
+    valid = (window >= low) & (window <= high)
     # Median of the valid values per row: invalid ones sort to the end as +inf.
-    window = np.sort(np.where(valid, window, np.inf), axis=1)
-    counts = valid.sum(axis=1)
+    window = np.sort(np.where(valid, window, np.inf).astype(window.dtype, copy=False), axis=1)
+    counts = np.count_nonzero(valid, axis=1)
     rows_index = np.arange(len(u))
-    upper = window[rows_index, counts // 2]
-    lower = window[rows_index, np.maximum(counts - 1, 0) // 2]
+    upper = window[rows_index, counts // 2].astype(np.float64)
+    lower = window[rows_index, np.maximum(counts - 1, 0) // 2].astype(np.float64)
     measured: FloatArray = np.where(counts > 0, 0.5 * (upper + lower), 0.0)
     return measured
