@@ -8,7 +8,8 @@ Requests and answers are the `api_schema` models; error answers raise the typed 
 wire's png16 depth and COCO RLE. It needs api_schema, pbdag_errors, httpx, numpy and pillow only.
 """
 
-from pbdag_client.client import DEFAULT_TIMEOUT_S, AsyncClient, Client, Submitted, scenes_called
+from pbdag_client.async_client import AsyncClient
+from pbdag_client.client import Client
 from pbdag_client.encoding import (
     build_batch,
     build_frame,
@@ -37,6 +38,7 @@ from pbdag_client.errors import (
     ServerError,
     Unauthorized,
 )
+from pbdag_client.routes import DEFAULT_TIMEOUT_S, Submitted, scenes_called
 
 __all__ = [
     "DEFAULT_TIMEOUT_S",
