@@ -4,7 +4,6 @@ replays it to the same states, serves its rows, and `pbdag rebuild` finds no dif
 from __future__ import annotations
 
 from collections import Counter
-from collections.abc import Iterator
 from pathlib import Path
 
 import orjson
@@ -13,36 +12,14 @@ import sqlalchemy as sa
 
 from core.upcasters import LEGACY_NAMES
 from service.app import create_app
-from service.bootstrap import Container, build_container
+from service.bootstrap import Container
 from service.cli import main
-from service.settings import Settings
-from service.store.engine import write_transaction
 from service.store.projection import rebuild_scene
 from service.store.tables import events
 from service.worker import Worker
 from tests.clients import local_client
-from tests.golden_logs import BEFORE_EVENT_TOPICS, insert_rows, laid_out_as
+from tests.golden_logs import BEFORE_EVENT_TOPICS, laid_out_as
 from tests.wire_scenes import batch
-
-
-@pytest.fixture
-def old_database(
-    backend: str, request: pytest.FixtureRequest, tmp_path: Path
-) -> Iterator[tuple[str, Container, list[str]]]:
-    """(database url, container, scene ids by number): the golden rows in a fresh database."""
-    if backend == "sqlite":
-        url = f"sqlite:///{tmp_path / 'old.db'}"
-    else:
-        server, schema = request.getfixturevalue("postgres_schema_url")
-        url = f"{server}?options=-csearch_path%3D{schema}"
-    settings = Settings(database_url=url, data_dir=tmp_path / "data", allow_anonymous_local=True)
-    container = build_container(settings)
-    with write_transaction(container.engine) as connection:
-        scene_ids = insert_rows(connection, BEFORE_EVENT_TOPICS)
-    try:
-        yield url, container, scene_ids
-    finally:
-        container.engine.dispose()
 
 
 def test_the_old_database_replays_and_loads_to_the_states_the_old_code_folded(

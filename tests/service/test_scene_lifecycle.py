@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Iterator
-from pathlib import Path
 from typing import Any
 
 import pytest
@@ -17,8 +15,7 @@ from fastapi.testclient import TestClient
 from core.decide import decide
 from core.state import SceneState
 from service.app import create_app
-from service.bootstrap import Container, build_container
-from service.settings import Settings
+from service.bootstrap import Container
 from service.store import scene_deletion
 from service.store.blobs import ORPHAN_GRACE_SECONDS, BlobNotFound
 from service.store.engine import write_transaction
@@ -27,7 +24,6 @@ from service.store.scene_deletion import delete_scene
 from service.store.tables import baselines, batches, scenes
 from service.worker import Worker
 from tests.clients import local_client
-from tests.golden_logs import BEFORE_EVENT_TOPICS, insert_rows
 from tests.service.scene_rows import bearer, blob_keys_of, rows_of
 from tests.wire_scenes import batch
 
@@ -303,30 +299,10 @@ def test_a_queue_row_of_a_deleted_scene_cannot_be_written(
         )
 
 
-@pytest.fixture
-def golden(
-    backend: str, request: pytest.FixtureRequest, tmp_path: Path
-) -> Iterator[tuple[Container, list[str]]]:
-    """The golden rows of tests/resources (scene 2 started from scene 1's baseline v1)."""
-    if backend == "sqlite":
-        url = f"sqlite:///{tmp_path / 'old.db'}"
-    else:
-        server, schema = request.getfixturevalue("postgres_schema_url")
-        url = f"{server}?options=-csearch_path%3D{schema}"
-    settings = Settings(database_url=url, data_dir=tmp_path / "data", allow_anonymous_local=True)
-    container = build_container(settings)
-    with write_transaction(container.engine) as connection:
-        scene_ids = insert_rows(connection, BEFORE_EVENT_TOPICS)
-    try:
-        yield container, scene_ids
-    finally:
-        container.engine.dispose()
-
-
 def test_scenes_started_from_a_deleted_scenes_baseline_keep_working(
-    golden: tuple[Container, list[str]],
+    old_database: tuple[str, Container, list[str]],
 ) -> None:
-    container, scene_ids = golden
+    _url, container, scene_ids = old_database
     source, session = scene_ids[1], scene_ids[2]
     assert container.log.load_state(session).source_baseline is not None
     reference = {"scene_id": source, "version": 1}
