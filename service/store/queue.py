@@ -15,15 +15,13 @@ import sqlalchemy as sa
 
 from service.store.blobs import BlobStore
 from service.store.engine import read_transaction, write_transaction
-from service.store.errors import BatchConflict, LeaseLost, StoreError
+from service.store.errors import BatchConflict, LeaseLost, SceneNotFound, StoreError
 from service.store.queue_records import (
     CLAIMABLE,
-    FINISHED,
     UNFINISHED,
     Admission,
     BatchRecord,
     Claim,
-    Collected,
     NotRequeueable,
     QueueFull,
     QuotaExceeded,
@@ -31,10 +29,11 @@ from service.store.queue_records import (
     held_by,
     record_of,
 )
-from service.store.tables import batches
+from service.store.queue_retention import QueueRetention
+from service.store.tables import batches, scenes
 
 
-class BatchQueue:
+class BatchQueue(QueueRetention):
     """The job queue on one engine, with the blob store of the raw batches; `clock` is
     injectable so tests can expire leases."""
 
@@ -115,10 +114,19 @@ class BatchQueue:
         except sa.exc.IntegrityError:
             existing = self.get(scene_id, batch_id)
             if existing is None:
+                self._scene_exists_or_raise(scene_id)  # deleted since the caller found it
                 raise
         if existing.content_sha256 != content_sha256:
             raise BatchConflict(f"batch {batch_id!r} was already posted with different content")
         return existing, False
+
+    def _scene_exists_or_raise(self, scene_id: str) -> None:
+        """SceneNotFound when the scene is gone: its row's foreign key refused the batch (a
+        folder's blob, written first, is an orphan that `pbdag gc` sweeps)."""
+        with read_transaction(self.engine) as connection:
+            found = connection.execute(sa.select(scenes.c.id).where(scenes.c.id == scene_id))
+            if found.first() is None:
+                raise SceneNotFound(scene_id)
 
     def _put_first(
         self, scene_id: str, batch_id: str, blob: bytes | None, bounds: Admission
@@ -389,61 +397,3 @@ class BatchQueue:
                 finished_at=self.clock(),
             )
         )
-
-    # -- retention (`pbdag gc`) ---------------------------------------------------------------
-
-    def finished_before(self, cutoff: float) -> list[BatchRecord]:
-        """Done or dead batches finished before `cutoff` whose raw body is still kept."""
-        with read_transaction(self.engine) as connection:
-            rows = connection.execute(
-                sa.select(batches)
-                .where(
-                    batches.c.status.in_(FINISHED),
-                    batches.c.finished_at < cutoff,
-                    batches.c.blob_collected_at.is_(None),
-                )
-                .order_by(batches.c.id)
-            ).all()
-        return [record_of(row) for row in rows]
-
-    def mark_collected(self, ids: list[int]) -> tuple[list[Collected], set[str]]:
-        """Mark these batches' raw bodies collected, those still finished and not yet collected;
-        (the marked ones, the keys among theirs that no uncollected row holds any more).
-
-        Only blobs of the second set may be deleted, after this commits: a requeue and a claim
-        need a row that is not collected, and `requeue` tests that under the same row lock.
-        """
-        marked: list[Collected] = []
-        with write_transaction(self.engine) as connection:
-            for start in range(0, len(ids), 500):
-                rows = connection.execute(
-                    sa.update(batches)
-                    .where(
-                        batches.c.id.in_(ids[start : start + 500]),
-                        batches.c.status.in_(FINISHED),
-                        batches.c.blob_collected_at.is_(None),
-                    )
-                    .values(blob_collected_at=self.clock())
-                    .returning(
-                        batches.c.id,
-                        batches.c.scene_id,
-                        batches.c.batch_id,
-                        batches.c.blob_key,
-                        batches.c.blob_bytes,
-                    )
-                ).all()
-                marked += [Collected(*row) for row in rows]
-            keys = sorted({item.blob_key for item in marked})
-            still_held: set[str] = set()
-            for start in range(0, len(keys), 500):
-                still_held |= set(
-                    connection.execute(
-                        sa.select(batches.c.blob_key)
-                        .where(
-                            batches.c.blob_key.in_(keys[start : start + 500]),
-                            batches.c.blob_collected_at.is_(None),
-                        )
-                        .distinct()
-                    ).scalars()
-                )
-        return sorted(marked, key=lambda item: item.id), set(keys) - still_held

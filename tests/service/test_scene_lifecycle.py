@@ -299,6 +299,25 @@ def test_a_queue_row_of_a_deleted_scene_cannot_be_written(
         )
 
 
+def test_a_batch_posted_while_its_scene_is_deleted_is_404_and_stores_nothing(
+    client: TestClient, container: Container, scene_id: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The route found the scene; an admin deletes it before the queue row is written. The
+    foreign key refuses the row, and the answer is the scene's 404, not a 500."""
+    submit = container.queue.submit
+
+    def deleted_first(*args: Any, **kwargs: Any) -> Any:
+        delete_scene(container.engine, container.blobs, scene_id)
+        return submit(*args, **kwargs)
+
+    monkeypatch.setattr(container.queue, "submit", deleted_first)
+    response = client.post(f"/v1/scenes/{scene_id}/batches", json=batch("late", 0))
+    assert response.status_code == 404, response.text
+    problem = response.json()
+    assert problem["field"] == "scene_id" and scene_id in problem["detail"]
+    assert rows_of(container.engine, scene_id) == NOTHING
+
+
 def test_scenes_started_from_a_deleted_scenes_baseline_keep_working(
     old_database: tuple[str, Container, list[str]],
 ) -> None:
