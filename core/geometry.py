@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -72,10 +73,12 @@ def interior_pixels(
     if isinstance(mask, np.ndarray):
         crop = mask[r0:r1, c0:c1]
     else:
+        # The mask drawn on its own bounding box (which holds the valid pixels' box), then cut.
         rows_all, cols_all = np.divmod(mask_index, width)
-        inside = (rows_all >= r0) & (rows_all < r1) & (cols_all >= c0) & (cols_all < c1)
-        crop = np.zeros((r1 - r0, c1 - c0), dtype=bool)
-        crop[rows_all[inside] - r0, cols_all[inside] - c0] = True
+        top, left = int(rows_all[0]), int(cols_all.min())
+        whole = np.zeros((int(rows_all[-1]) + 1 - top, int(cols_all.max()) + 1 - left), bool)
+        whole[rows_all - top, cols_all - left] = True
+        crop = whole[r0 - top : r1 - top, c0 - left : c1 - left]
     local_rows, local_cols = np.nonzero(erode_square(crop, erosion_px))
     flat: npt.NDArray[np.intp] = (local_rows + r0) * width + (local_cols + c0)
     return flat
@@ -98,13 +101,13 @@ def erode_square(mask: npt.NDArray[np.bool_], radius: int) -> npt.NDArray[np.boo
 def column_quantiles(points: FloatArray, fractions: tuple[float, ...]) -> FloatArray:
     """Linear-interpolated quantiles (numpy's default method) of each column of (n, d) points,
     one row per fraction: the order statistics they read are selected, not the columns sorted."""
-    count = points.shape[0]
-    positions = np.asarray(fractions) * (count - 1)
-    low = np.floor(positions).astype(np.intp)
-    high = np.minimum(low + 1, count - 1)
+    last = points.shape[0] - 1
+    positions = [fraction * last for fraction in fractions]
+    low = [math.floor(position) for position in positions]
+    high = [min(index + 1, last) for index in low]
     rows = np.ascontiguousarray(points.T)  # a selection along contiguous memory is faster
-    selected = np.partition(rows, np.unique(np.concatenate((low, high))), axis=1)
-    weight = positions - low
+    selected = np.partition(rows, sorted({*low, *high}), axis=1)
+    weight = np.array([position - index for position, index in zip(positions, low, strict=True)])
     result: FloatArray = (selected[:, low] * (1.0 - weight) + selected[:, high] * weight).T
     return result
 
