@@ -84,8 +84,11 @@ class Track:
         if unknown:
             raise TypeError(f"Track has no changeable field {sorted(unknown)}")
         copy = object.__new__(Track)
-        fields_now = {key: value for key, value in self.__dict__.items() if key in _TRACK_FIELDS}
-        copy.__dict__.update(fields_now, **changes)
+        state = copy.__dict__
+        state.update(self.__dict__)
+        for name in _CACHED:
+            state.pop(name, None)
+        state.update(changes)
         return copy
 
     @cached_property
@@ -222,6 +225,9 @@ class TrackChanges(TypedDict, total=False):
 
 _TRACK_FIELDS = frozenset(f.name for f in fields(Track))
 _CHANGEABLE = TrackChanges.__optional_keys__
+_CACHED = frozenset(
+    name for name, value in vars(Track).items() if isinstance(value, cached_property)
+)
 
 
 def _vec3(values: Any) -> Vec3:
