@@ -13,6 +13,7 @@ from api_schema import Health, WorkerStatus
 from service.bootstrap import Container, build_container
 from service.errors import install_problem_handlers
 from service.feed import StreamSlots
+from service.handoff import Handoff
 from service.metrics import CONTENT_TYPE_LATEST
 from service.middleware.body_limit import BodySizeLimit
 from service.middleware.content_type_options import ContentTypeOptions
@@ -48,7 +49,7 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
 
     @asynccontextmanager
     async def lifespan(_app: FastAPI) -> AsyncIterator[None]:
-        worker = WorkerThread(container) if run_worker else None
+        worker = WorkerThread(container, app.state.handoff) if run_worker else None
         app.state.worker = worker
         if worker is not None:
             worker.start()
@@ -78,6 +79,9 @@ def create_app(container: Container | None = None, *, run_worker: bool = False) 
     app.state.states = StateReader(container.log)
     app.state.streams = StreamSlots(container.settings.max_streams)
     app.state.wakeups = None  # set while the lifespan runs, on PostgreSQL
+    # What the API decodes, its worker need not decode again (only when it runs one).
+    handoff_bytes = container.settings.handoff_max_bytes
+    app.state.handoff = Handoff(handoff_bytes) if run_worker and handoff_bytes > 0 else None
     install_problem_handlers(app)
     install_pages(app)  # /docs, /viewer, /static (innermost: their headers on their answers)
     app.add_middleware(BodySizeLimit, max_bytes=container.settings.max_body_bytes)

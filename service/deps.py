@@ -18,6 +18,7 @@ from pydantic import (
 from api_schema.requests import PRINTABLE
 from service.bootstrap import Container
 from service.feed import StreamSlots
+from service.handoff import Handoff
 from service.settings import Settings
 from service.states import StateReader
 from service.store.errors import SceneQuarantined, SeqOutOfRange
@@ -48,6 +49,12 @@ def get_streams(request: Request) -> StreamSlots:
     return slots
 
 
+def get_handoff(request: Request) -> Handoff | None:
+    """The hand-off to this process's worker (None when the process runs none)."""
+    handoff: Handoff | None = request.app.state.handoff
+    return handoff
+
+
 def get_wakeups(request: Request) -> Wakeups | None:
     """The app's LISTEN/NOTIFY wake-ups (None but on PostgreSQL, while the app runs)."""
     wakeups: Wakeups | None = request.app.state.wakeups
@@ -58,6 +65,7 @@ ContainerDep = Annotated[Container, Depends(get_container)]
 StatesDep = Annotated[StateReader, Depends(get_states)]
 StreamsDep = Annotated[StreamSlots, Depends(get_streams)]
 WakeupsDep = Annotated[Wakeups | None, Depends(get_wakeups)]
+HandoffDep = Annotated[Handoff | None, Depends(get_handoff)]
 SceneId = Annotated[
     str, Path(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9._:-]+$", description="Scene id.")
 ]

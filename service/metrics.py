@@ -92,6 +92,11 @@ class Metrics:
         )
         for outcome in ("done", "retry", "dead", "lease_lost", "dropped"):
             self.batches_processed.labels(outcome)
+        self.batches_handed_off = Counter(
+            "pbdag_batches_handed_off",
+            "Batches this process's worker took as the API decoded them, not decoding them again.",
+            registry=self.registry,
+        )
         self.dead_letters = Counter(
             "pbdag_dead_letters",
             "Batches this process parked as dead (never decodable, or out of attempts).",

@@ -142,6 +142,12 @@ class Settings(SecuritySettings):
     state_cache_scenes: int = Field(
         64, description="Scene states a worker keeps in memory between batches."
     )
+    handoff_max_bytes: int = Field(
+        64 * 1024 * 1024,
+        ge=0,
+        description="`pbdag serve` with its worker hands the batches its API decoded to the "
+        "worker, up to this many bytes in all, so they are not decoded twice (0: off).",
+    )
     # The live change feed (`GET /v1/scenes/{id}/events/stream`).
     max_streams: int = Field(
         64,

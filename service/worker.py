@@ -31,9 +31,11 @@ import pydantic
 from api_schema import BatchIn
 from codec.observations import decode_batch
 from core.decide import decide
+from core.observation import Batch
 from core.state import SceneState
 from pbdag_errors import PbdagError
 from service.bootstrap import Container
+from service.handoff import Handoff
 from service.logs import log_context
 from service.store.blobs import BlobNotFound, RawBatchMissing
 from service.store.errors import (
@@ -101,9 +103,14 @@ class Worker:
     again; meanwhile it claims nothing and `health` says why."""
 
     def __init__(
-        self, container: Container, name: str | None = None, seed: int | None = None
+        self,
+        container: Container,
+        name: str | None = None,
+        seed: int | None = None,
+        handoff: Handoff | None = None,
     ) -> None:
         self.container = container
+        self.handoff = handoff  # batches the API of this process decoded
         self.name = name or worker_name()
         self._states: OrderedDict[str, SceneState] = OrderedDict()
         self._random = random.Random(seed)
@@ -167,10 +174,7 @@ class Worker:
         try:
             with self._renewing(claim):
                 with metrics.timed(metrics.decide_seconds):
-                    body = decode_raw_batch(self._raw_body(claim))
-                    batch = decode_batch(
-                        BatchIn.model_validate_json(body), container.settings.input_limits()
-                    )
+                    batch = self._batch(claim)
                     state = self._state(claim.scene_id)
                     events = decide(state, batch)
                 with metrics.timed(metrics.append_seconds), container.uow.begin() as work:
@@ -221,6 +225,18 @@ class Worker:
         except Exception:
             return False
         return False
+
+    def _batch(self, claim: Claim) -> Batch:
+        """The claimed batch decoded: as this process's API decoded it when handed over, else
+        from its stored blob."""
+        handed = None if self.handoff is None else self.handoff.take(claim.id)
+        if handed is not None:
+            self.container.metrics.batches_handed_off.inc()
+            return handed
+        body = decode_raw_batch(self._raw_body(claim))
+        return decode_batch(
+            BatchIn.model_validate_json(body), self.container.settings.input_limits()
+        )
 
     def _raw_body(self, claim: Claim) -> bytes:
         """The stored batch; RawBatchCollected when `pbdag gc` deleted it (a copy made by
@@ -375,8 +391,8 @@ class Worker:
 class WorkerThread:
     """A worker in a background thread of the API process (`pbdag serve`)."""
 
-    def __init__(self, container: Container) -> None:
-        self.worker = Worker(container)
+    def __init__(self, container: Container, handoff: Handoff | None = None) -> None:
+        self.worker = Worker(container, handoff=handoff)
         self.stop = threading.Event()
         self.thread = threading.Thread(
             target=self.worker.run, args=(self.stop,), name="pbdag-worker", daemon=True

@@ -13,7 +13,7 @@ from codec.canonical import canonical_json
 from codec.observations import decode_batch
 from core.errors import NotFound
 from service.auth import RequireAdmin
-from service.deps import ContainerDep, SceneDep, admission
+from service.deps import ContainerDep, HandoffDep, SceneDep, admission
 from service.store.raw_batches import encode_raw_batch
 from service.wire import batch_out
 
@@ -29,11 +29,15 @@ BatchId = Annotated[str, Path(min_length=1, max_length=200, pattern=r"^[A-Za-z0-
     responses={200: {"model": BatchStatus, "description": "The same batch was already accepted."}},
 )
 def post_batch(
-    scene: SceneDep, batch: BatchIn, response: Response, container: ContainerDep
+    scene: SceneDep,
+    batch: BatchIn,
+    response: Response,
+    container: ContainerDep,
+    handoff: HandoffDep,
 ) -> BatchStatus:
     """Validate and durably queue a batch (202); the same batch_id and content again returns the original (200)."""
     settings = container.settings
-    decode_batch(batch, settings.input_limits())  # 422 naming the field; nothing is stored
+    decoded = decode_batch(batch, settings.input_limits())  # 422 naming the field; nothing stored
     # Idempotency is over the canonical JSON; the blob keeps it compactly (binary depth, zstd).
     body = batch.model_dump(mode="json")
     content_sha256 = hashlib.sha256(canonical_json(body)).hexdigest()
@@ -47,6 +51,8 @@ def post_batch(
     )
     if not created:
         response.status_code = 200
+    elif handoff is not None:
+        handoff.put(record.id, decoded)  # this process's worker takes it instead of decoding
     logger.info(
         "batch %s %s (%d frames)",
         batch.batch_id,
