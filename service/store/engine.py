@@ -24,7 +24,6 @@ from service.store.errors import StoreUnavailable
 MIGRATIONS_DIR = Path(__file__).resolve().parents[2] / "migrations"
 IMMEDIATE = "pbdag_immediate"
 WAL_CHECKPOINT_PAGES = 10_000  # about 40 MB of WAL between automatic checkpoints (4 kB pages)
-SQLITE_CACHE_KIB = 16_384  # each connection's page cache: 16 MB rather than SQLite's 2 MB
 
 
 def make_engine(url: str, **kwargs: Any) -> sa.Engine:
@@ -73,10 +72,6 @@ def _sqlite_engine(url: str, **kwargs: Any) -> sa.Engine:
         # touches, and a checkpoint writes (and syncs) each page once however often it changed.
         # Durability is unchanged: every commit still syncs the WAL.
         cursor.execute(f"PRAGMA wal_autocheckpoint={WAL_CHECKPOINT_PAGES}")
-        # An append inserts into the leaf of the per-track index where each of its tracks ends:
-        # with hundreds of live tracks those leaves (and the projection's rows) outgrow 2 MB of
-        # cache and are read back from the WAL at every batch. A bound, not an allocation.
-        cursor.execute(f"PRAGMA cache_size=-{SQLITE_CACHE_KIB}")
         cursor.execute("PRAGMA busy_timeout=30000")
         cursor.execute("PRAGMA foreign_keys=ON")
         cursor.close()
