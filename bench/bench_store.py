@@ -59,6 +59,7 @@ from bench.store_appenders import (
     TheirAppender,
     appended_per_second,
     new_scene,
+    ratio_range,
 )
 from core.evolve import fold
 from service.settings import Settings
@@ -228,6 +229,7 @@ def bench_versus(args: argparse.Namespace) -> None:
                 a.name: {b: [] for b in VERSUS_BATCHES} for a in pair
             }
             try:
+                check_durability(name, pair)
                 for batch in VERSUS_BATCHES:  # warm-up, not counted
                     for appender in pair:
                         appended_per_second(appender, stream[: VERSUS_EVENTS[batch] // 10], batch)
@@ -247,19 +249,24 @@ def bench_versus(args: argparse.Namespace) -> None:
                 str(batch): versus_row({key: samples[key][batch] for key in samples})
                 for batch in VERSUS_BATCHES
             }
-    print(f"\nevents appended per second, median of {args.rounds} interleaved rounds")
+    print(f"\nevents appended per second, median of {args.rounds} interleaved rounds;")
+    print("ours/theirs: the ratio of the medians, then the lowest and highest round's ratio")
     print(
-        f"{'backend':<10}{'batch':>6}{'ours':>10}{'eventsourcing':>15}{'ours/theirs':>13}"
-        f"{'per track':>11}{'ours/theirs':>13}"
+        f"{'backend':<10}{'batch':>6}{'ours':>9}{'eventsourcing':>15}{'ours/theirs':>22}"
+        f"{'per track':>11}{'ours/theirs':>22}"
     )
     for name, _ in built:
         for batch in VERSUS_BATCHES:
             row = by_backend[name][str(batch)]
+            ours = row.samples["ours"]
+            one = ratio_range(ours, row.samples["eventsourcing"])
+            per_track = ratio_range(ours, row.samples["eventsourcing per track"])
             print(
-                f"{name:<10}{batch:>6}{row.ours_events_per_s:>10,.0f}"
-                f"{row.eventsourcing_events_per_s:>15,.0f}{row.ratio:>13.2f}"
+                f"{name:<10}{batch:>6}{row.ours_events_per_s:>9,.0f}"
+                f"{row.eventsourcing_events_per_s:>15,.0f}"
+                f"{row.ratio:>10.2f} ({one[0]:.2f}-{one[1]:.2f})"
                 f"{row.eventsourcing_per_track_events_per_s:>11,.0f}"
-                f"{row.ratio_per_track:>13.2f}"
+                f"{row.ratio_per_track:>10.2f} ({per_track[0]:.2f}-{per_track[1]:.2f})"
             )
     results = VersusResult(
         rounds=args.rounds,
@@ -270,6 +277,15 @@ def bench_versus(args: argparse.Namespace) -> None:
         postgres=by_backend.get("postgres"),
     )
     write_results("store-versus", results)
+
+
+def check_durability(backend: str, appenders: list[OurAppender | TheirAppender]) -> None:
+    """Print each appender's durability settings; stop when they differ (no fair comparison)."""
+    settings = {appender.name: appender.durability() for appender in appenders}
+    for name, setting in settings.items():
+        print(f"{backend}, {name}: {setting}")
+    if len(set(settings.values())) != 1:
+        sys.exit(f"{backend}: the appenders commit at different durability")
 
 
 def versus_row(samples: dict[str, list[float]]) -> VersusRow:

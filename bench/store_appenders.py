@@ -7,6 +7,7 @@ import time
 import uuid
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import orjson
 import sqlalchemy as sa
@@ -41,6 +42,14 @@ class OurAppender:
         with write_transaction(self.log.engine) as connection:
             self.log.append(connection, self.scene_id, self.head, chunk)
         self.head += len(chunk)
+
+    def durability(self) -> str:
+        """The settings a commit's durability depends on, as the appending connection has them."""
+        with write_transaction(self.log.engine) as connection:
+            driver: Any = connection.connection.driver_connection
+            if is_sqlite(self.log.engine):
+                return sqlite_durability(driver.cursor())
+            return postgres_durability(driver.cursor())
 
     def close(self) -> None:
         """Nothing to release (the engine belongs to the caller)."""
@@ -113,9 +122,43 @@ class TheirAppender:
             )
         self.recorder.insert_events(stored)
 
+    def durability(self) -> str:
+        """The settings a commit's durability depends on, as the recorder's writer has them."""
+        from eventsourcing.postgres import PostgresDatastore
+
+        if isinstance(self.datastore, PostgresDatastore):
+            with self.datastore.get_connection() as connection, connection.cursor() as cursor:
+                return postgres_durability(cursor)
+        with self.datastore.transaction(commit=True) as cursor:
+            return sqlite_durability(cursor)
+
     def close(self) -> None:
         """Close the recorder's connection pool."""
         self.datastore.close()
+
+
+def sqlite_durability(cursor: Any) -> str:
+    """journal_mode and synchronous (2 is FULL) of a SQLite connection."""
+    cursor.execute("PRAGMA journal_mode")
+    journal = cursor.fetchone()[0]
+    cursor.execute("PRAGMA synchronous")
+    return f"journal_mode={journal} synchronous={cursor.fetchone()[0]}"
+
+
+def postgres_durability(cursor: Any) -> str:
+    """fsync, synchronous_commit and full_page_writes of a PostgreSQL session."""
+    settings = []
+    for name in ("fsync", "synchronous_commit", "full_page_writes"):
+        cursor.execute(f"SHOW {name}")
+        row = cursor.fetchone()
+        settings.append(f"{name}={row[name] if isinstance(row, dict) else row[0]}")
+    return " ".join(settings)
+
+
+def ratio_range(ours: Sequence[float], theirs: Sequence[float]) -> tuple[float, float]:
+    """The lowest and highest of the rounds' ratios (the rounds are paired: interleaved)."""
+    ratios = [mine / peer for mine, peer in zip(ours, theirs, strict=True)]
+    return min(ratios), max(ratios)
 
 
 def appended_per_second(

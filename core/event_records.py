@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from math import isfinite
 from typing import Any, get_args
 
 from core.event_envelope import payload_adapter
@@ -80,21 +81,30 @@ def _surely_finite(value: Any) -> bool:
     """True only when `value` holds no NaN or infinity; False may also mean "look closer".
 
     A list of numbers is summed in one C loop: any NaN or infinity makes the sum non-finite
-    (a finite sum that overflows only sends the caller to the exact walk).
+    (a finite sum that overflows only sends the caller to the exact walk). A dict's leaves are
+    checked in its own loop, without a call per value (the append checks every event: 7.7 ->
+    4.8 us for the bench's 1 kB events).
     """
     kind = type(value)
-    if kind is float:
-        return math.isfinite(value)
-    if kind is str or kind is int or kind is bool or value is None:
-        return True
     if kind is dict:
-        return all(_surely_finite(item) for item in value.values())
+        for item in value.values():
+            kind = type(item)
+            if kind is float:
+                if not isfinite(item):
+                    return False
+            elif not (
+                kind is str or kind is int or kind is bool or item is None or _surely_finite(item)
+            ):
+                return False
+        return True
     if kind is list or kind is tuple:
         try:
-            return math.isfinite(sum(value))
+            return isfinite(sum(value))
         except (TypeError, OverflowError):  # not only numbers, or an int too large for a float
             return all(_surely_finite(item) for item in value)
-    return False
+    if kind is float:
+        return isfinite(value)
+    return kind is str or kind is int or kind is bool or value is None
 
 
 def _first_non_finite(value: Any, path: str) -> str | None:

@@ -1,7 +1,8 @@
 """The append's statements, per backend: the conditional head update and the insert of the rows.
 
 The head update serializes writers of one scene until commit; zero rows updated means somebody
-else appended first, and nothing is written.
+else appended first, and nothing is written. On PostgreSQL the head update also notifies
+`EVENTS_CHANNEL` (service/store/notifications.py), delivered at commit, in the same statement.
 """
 
 from __future__ import annotations
@@ -11,18 +12,29 @@ from typing import Any
 
 import sqlalchemy as sa
 
+from service.store.engine import sqlite_execute
 from service.store.errors import ConcurrencyConflict
-from service.store.tables import events, scenes
+from service.store.notifications import EVENTS_CHANNEL
+from service.store.tables import events
 
-# The conditional head update, built once (the append is the hot path).
-HEAD_UPDATE = (
-    sa.update(scenes)
-    .where(scenes.c.id == sa.bindparam("scene_id"), scenes.c.head_seq == sa.bindparam("expected"))
-    .values(head_seq=scenes.c.head_seq + sa.bindparam("count", type_=sa.BigInteger))
+# An event's row (EventLog._event_row): its values in this order, one per column of `events`.
+EVENT_COLUMNS = (
+    "scene_id",
+    "seq",
+    "type",
+    "track_id",
+    "state",
+    "batch_id",
+    "frame_id",
+    "recorded_at",
+    "details",
+    "batch_time",
 )
+EventRow = tuple[Any, ...]
+if sorted(EVENT_COLUMNS) != sorted(events.columns.keys()):  # a column added to one, not the other
+    raise RuntimeError(f"EVENT_COLUMNS {EVENT_COLUMNS} are not the columns of events")
 
 # The same two statements as SQLite's driver runs them (qmark parameters).
-EVENT_COLUMNS = tuple(column.name for column in events.columns)
 SQLITE_HEAD_UPDATE = "UPDATE scenes SET head_seq = head_seq + ? WHERE id = ? AND head_seq = ?"
 SQLITE_INSERT = (
     f"INSERT INTO events ({', '.join(EVENT_COLUMNS)}) "
@@ -38,12 +50,13 @@ SQLITE_INSERT = (
 # round trip saved), so larger batches take the two statements.
 ONE_STATEMENT_MAX = 32
 ARRAY_COLUMNS = ("type", "track_id", "state", "frame_id", "details")
+ARRAY_POSITIONS = tuple((column, EVENT_COLUMNS.index(column)) for column in ARRAY_COLUMNS)
 POSTGRES_APPEND = sa.text(
     """
     WITH head AS (
         UPDATE scenes SET head_seq = head_seq + :count
         WHERE id = CAST(:scene_id AS text) AND head_seq = :expected
-        RETURNING head_seq
+        RETURNING head_seq, pg_notify(CAST(:channel AS text), CAST(:scene_id AS text))
     )
     INSERT INTO events
         (scene_id, seq, type, track_id, state, batch_id, frame_id, recorded_at, details,
@@ -57,19 +70,26 @@ POSTGRES_APPEND = sa.text(
     ) WITH ORDINALITY AS row(type, track_id, state, frame_id, details, n)
     """
 )
+# Larger batches on PostgreSQL: the head update (notifying at commit), then the rows.
+POSTGRES_HEAD_UPDATE = sa.text(
+    "UPDATE scenes SET head_seq = head_seq + :count "
+    "WHERE id = CAST(:scene_id AS text) AND head_seq = :expected "
+    "RETURNING pg_notify(CAST(:channel AS text), CAST(:scene_id AS text))"
+)
 
 
 def insert_rows(
     connection: sa.Connection,
     scene_id: str,
     expected_head: int,
-    rows: Sequence[dict[str, Any]],
+    rows: Sequence[EventRow],
     batch_id: str | None,
     now: float,
     batch_time: float | None = None,
 ) -> None:
     """Move the scene's head from `expected_head` past the rows and insert them, inside the
-    caller's write transaction; ConcurrencyConflict (nothing written) when the head moved."""
+    caller's write transaction; ConcurrencyConflict (nothing written) when the head moved.
+    PostgreSQL: the listeners of EVENTS_CHANNEL are told the scene's id at commit."""
     count = len(rows)
     dialect = connection.dialect.name
     if dialect == "postgresql" and count <= ONE_STATEMENT_MAX:
@@ -80,29 +100,31 @@ def insert_rows(
                 "scene_id": scene_id,
                 "expected": expected_head,
                 "count": count,
+                "channel": EVENTS_CHANNEL,
                 "batch_id": batch_id,
                 "recorded_at": now,
                 "batch_time": batch_time,
-                **{f"{column}s": [row[column] for row in rows] for column in ARRAY_COLUMNS},
+                **{f"{column}s": [row[at] for row in rows] for column, at in ARRAY_POSITIONS},
             },
         ).rowcount
         if inserted != count:
             raise _moved(scene_id, expected_head)
         return
     if dialect == "sqlite":
-        # The driver's own statements: SQLAlchemy's compilation and parameter handling cost
-        # more than SQLite's commit for a batch of one (`bench.bench_store versus`). Its error
-        # handling still applies (exec_driver_sql).
+        # On the driver's own connection: SQLAlchemy's execution costs more CPU than SQLite's
+        # work for a batch of one (`bench.bench_store versus`); its errors are raised as
+        # SQLAlchemy's would be (sqlite_execute).
         head = (count, scene_id, expected_head)
-        if connection.exec_driver_sql(SQLITE_HEAD_UPDATE, head).rowcount != 1:
+        if sqlite_execute(connection, SQLITE_HEAD_UPDATE, head).rowcount != 1:
             raise _moved(scene_id, expected_head)
-        values = [tuple(row[column] for column in EVENT_COLUMNS) for row in rows]
-        connection.exec_driver_sql(SQLITE_INSERT, values)
+        sqlite_execute(connection, SQLITE_INSERT, rows, many=True)
         return
-    parameters = {"scene_id": scene_id, "expected": expected_head, "count": count}
-    if connection.execute(HEAD_UPDATE, parameters).rowcount != 1:
+    moved = {"scene_id": scene_id, "expected": expected_head, "count": count}
+    if connection.execute(POSTGRES_HEAD_UPDATE, {**moved, "channel": EVENTS_CHANNEL}).rowcount != 1:
         raise _moved(scene_id, expected_head)
-    connection.execute(events.insert(), rows)
+    connection.execute(
+        events.insert(), [dict(zip(EVENT_COLUMNS, row, strict=True)) for row in rows]
+    )
 
 
 def _moved(scene_id: str, expected_head: int) -> ConcurrencyConflict:

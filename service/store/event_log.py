@@ -20,7 +20,7 @@ from core.evolve import fold
 from core.params import Params
 from core.state import SceneState
 from core.values import BaselineSource
-from service.store.append_sql import insert_rows
+from service.store.append_sql import EVENT_COLUMNS, EventRow, insert_rows
 from service.store.engine import gc_paused, read_transaction
 from service.store.errors import (
     NonFiniteEvent,
@@ -28,7 +28,6 @@ from service.store.errors import (
     SeqOutOfRange,
     UnreadableEvent,
 )
-from service.store.notifications import notify_appended
 from service.store.snapshot_codec import SNAPSHOT_VERSION, decode_snapshot, encode_snapshot
 from service.store.tables import events, scenes, snapshots
 
@@ -160,9 +159,8 @@ class EventLog:
             )
         )
         created = SceneCreated(name=name, params=params.to_dict(), baseline=baseline)
-        connection.execute(
-            events.insert(), [self._event_row(scene_id, 0, created, None, now, None)]
-        )
+        row = self._event_row(scene_id, 0, created, None, now, None)
+        connection.execute(events.insert(), [dict(zip(EVENT_COLUMNS, row, strict=True))])
         return SceneRecord(scene_id, name, params.to_dict(), 0, now, None), created
 
     def scene(self, scene_id: str, connection: sa.Connection | None = None) -> SceneRecord:
@@ -200,7 +198,8 @@ class EventLog:
         batch_id: str | None,
         now: float,
         batch_time: float | None,
-    ) -> dict[str, Any]:
+    ) -> EventRow:
+        """The event's row, its values in the order of EVENT_COLUMNS."""
         details = event.details()
         bad = non_finite_field(details)
         if bad is not None:  # orjson would store null, and the log could not be replayed
@@ -209,18 +208,18 @@ class EventLog:
                 f"at {bad}; nothing was appended",
                 field=bad,
             )
-        return {
-            "scene_id": scene_id,
-            "seq": seq,
-            "type": event.topic,
-            "track_id": event.track_id,
-            "state": event.state,
-            "batch_id": batch_id,
-            "frame_id": event.frame_id,
-            "recorded_at": now,
-            "details": orjson.dumps(details).decode(),
-            "batch_time": batch_time,
-        }
+        return (
+            scene_id,
+            seq,
+            event.topic,
+            event.track_id,
+            event.state,
+            batch_id,
+            event.frame_id,
+            now,
+            orjson.dumps(details).decode(),
+            batch_time,
+        )
 
     def append(
         self,
@@ -248,7 +247,6 @@ class EventLog:
             for i, event in enumerate(new_events)
         ]  # before any write: a non-finite number stops the append here
         insert_rows(connection, scene_id, expected_head, rows, batch_id, now, batch_time)
-        notify_appended(connection, scene_id)  # PostgreSQL: wakes the event streams at commit
         return expected_head + 1, expected_head + count
 
     def read(

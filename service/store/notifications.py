@@ -1,10 +1,11 @@
 """PostgreSQL's LISTEN/NOTIFY as an early wake-up of the event streams, never their source.
 
 Every append on PostgreSQL notifies `EVENTS_CHANNEL` with the scene's id, delivered when its
-transaction commits (`notify_appended`). Each API process holds one listening connection, in a
-thread (`Wakeups`), and wakes the streams of that scene waiting in its event loop. A stream still
-reads its events from the log and still polls it: a notification lost (the listener reconnecting,
-a process that started after the commit) only delays an event to the next poll.
+transaction commits (the append's head update does, in service/store/append_sql.py). Each API
+process holds one listening connection, in a thread (`Wakeups`), and wakes the streams of that
+scene waiting in its event loop. A stream still reads its events from the log and still polls
+it: a notification lost (the listener reconnecting, a process that started after the commit)
+only delays an event to the next poll.
 """
 
 from __future__ import annotations
@@ -22,16 +23,6 @@ LISTEN_TIMEOUT_S = 0.5  # how soon the listener sees that it should stop
 RECONNECT_S = 1.0
 
 logger = logging.getLogger("pbdag.feed")
-
-
-def notify_appended(connection: sa.Connection, scene_id: str) -> None:
-    """In the caller's append transaction: tell the listeners that `scene_id`'s log grew
-    (PostgreSQL only; delivered at commit, dropped with a rollback)."""
-    if connection.dialect.name == "postgresql":
-        connection.execute(
-            sa.text("SELECT pg_notify(:channel, :scene)"),
-            {"channel": EVENTS_CHANNEL, "scene": scene_id},
-        )
 
 
 class Wakeups:

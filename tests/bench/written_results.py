@@ -196,6 +196,9 @@ def write_store(mp: pytest.MonkeyPatch) -> None:
         def __init__(self, engine: str) -> None:
             self.engine = engine
 
+        def durability(self) -> str:
+            return "journal_mode=wal synchronous=2"
+
         def close(self) -> None:
             """Nothing to release."""
 

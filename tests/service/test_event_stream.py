@@ -22,8 +22,10 @@ from pbdag_client import Client, InvalidRequest
 from service.app import create_app
 from service.bootstrap import Container, build_container
 from service.settings import Settings
+from service.store.append_sql import ONE_STATEMENT_MAX
 from service.store.engine import write_transaction
-from service.store.errors import StoreUnavailable
+from service.store.errors import ConcurrencyConflict, StoreUnavailable
+from service.store.notifications import EVENTS_CHANNEL
 from service.store.tables import events, scenes, snapshots, tracks
 from tests.conftest import engine_for
 from tests.live_server import served
@@ -313,6 +315,32 @@ def test_on_postgres_a_notify_wakes_the_stream_before_its_poll(
     finally:
         engine.dispose()
     assert 0.3 <= elapsed < 2.0, elapsed  # the append's NOTIFY, not the next poll
+
+
+@pytest.mark.postgres
+def test_on_postgres_each_append_notifies_its_scene_once_at_commit_and_a_stale_one_never(
+    settings: Settings, tmp_path: Path, request: pytest.FixtureRequest
+) -> None:
+    engine = engine_for("postgres", tmp_path, request)
+    container = build_container(settings, engine=engine)
+    listener: Any = engine.raw_connection()
+    try:
+        driver = listener.driver_connection  # the psycopg connection
+        driver.autocommit = True
+        driver.execute(f"LISTEN {EVENTS_CHANNEL}")
+        scene = Scene(container)
+        stale = scene.state
+        many = [added(f"trk-{index}") for index in range(1, 1 + ONE_STATEMENT_MAX + 8)]
+        for batch in ([added("trk-a")], many):  # one statement, and the head update then rows
+            scene.append(*batch)
+        with pytest.raises(ConcurrencyConflict), container.uow.begin() as work:
+            work.append(scene.id, stale, [added("trk-late")])
+        # The channel is the database's: other schemas' scenes may be heard too.
+        heard = [notice.payload for notice in driver.notifies(timeout=1.0)]
+    finally:
+        listener.close()
+        engine.dispose()
+    assert [payload for payload in heard if payload == scene.id] == [scene.id, scene.id]
 
 
 def test_the_database_unavailable_closes_the_stream_for_a_resumption(
