@@ -29,7 +29,12 @@ from service.store.errors import (
     UnreadableEvent,
 )
 from service.store.notifications import notify_appended
-from service.store.snapshot_codec import SNAPSHOT_VERSION, decode_snapshot, encode_snapshot
+from service.store.snapshot_codec import (
+    READABLE_VERSIONS,
+    SNAPSHOT_VERSION,
+    decode_snapshot,
+    encode_snapshot,
+)
 from service.store.tables import events, scenes, snapshots
 
 READ_PAGE = 5000
@@ -396,9 +401,9 @@ class EventLog:
                 .order_by(snapshots.c.seq.desc())
                 .limit(1)
             ).first()
-        if found is None or found[0] != SNAPSHOT_VERSION:
+        if found is None or found[0] not in READABLE_VERSIONS:
             return None  # a cache in another format is ignored: replay from the start
-        return decode_snapshot(bytes(found[1]))
+        return decode_snapshot(bytes(found[1]), found[0])
 
     def save_snapshot(self, connection: sa.Connection, scene_id: str, state: SceneState) -> None:
         """Store a snapshot of `state` at its head (inside the caller's transaction)."""
