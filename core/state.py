@@ -84,7 +84,9 @@ class Track:
         if unknown:
             raise TypeError(f"Track has no changeable field {sorted(unknown)}")
         copy = object.__new__(Track)
-        fields_now = {key: value for key, value in self.__dict__.items() if key in _TRACK_FIELDS}
+        fields_now = self.__dict__
+        if fields_now.keys() != _TRACK_FIELDS:  # cached values (the label) are not copied
+            fields_now = {key: value for key, value in fields_now.items() if key in _TRACK_FIELDS}
         copy.__dict__.update(fields_now, **changes)
         return copy
 
