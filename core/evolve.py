@@ -307,10 +307,19 @@ def _summed(
 
 
 def _box(boxes: list[tuple[Vec3, Vec3]]) -> tuple[float, ...]:
-    """The union of (center, extent) boxes as (low x, y, z, high x, y, z)."""
-    low = [min(c[i] - e[i] / 2 for c, e in boxes) for i in range(3)]
-    high = [max(c[i] + e[i] / 2 for c, e in boxes) for i in range(3)]
-    return (*low, *high)
+    """The union of (center, extent) boxes as (low x, y, z, high x, y, z).
+
+    Per axis, min(c - e / 2) and max(c + e / 2) over the boxes in their order, unrolled (one or
+    two boxes per call on the fold's path): `min` of several values keeps the first of equal
+    ones, so chaining it pairwise gives the same floats as over the whole sequence.
+    """
+    c, e = boxes[0]
+    x0, y0, z0 = c[0] - e[0] / 2, c[1] - e[1] / 2, c[2] - e[2] / 2
+    x1, y1, z1 = c[0] + e[0] / 2, c[1] + e[1] / 2, c[2] + e[2] / 2
+    for c, e in boxes[1:]:
+        x0, y0, z0 = min(x0, c[0] - e[0] / 2), min(y0, c[1] - e[1] / 2), min(z0, c[2] - e[2] / 2)
+        x1, y1, z1 = max(x1, c[0] + e[0] / 2), max(y1, c[1] + e[1] / 2), max(z1, c[2] + e[2] / 2)
+    return (x0, y0, z0, x1, y1, z1)
 
 
 def _observed_box(

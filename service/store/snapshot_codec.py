@@ -2,57 +2,158 @@
 
 from __future__ import annotations
 
+import dataclasses
 import struct
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import orjson
 import zstandard
 
-from core.state import SNAPSHOT_FORMAT_VERSION, SceneState
+from core.state import SNAPSHOT_FORMAT_VERSION, SceneState, Track
 
-__all__ = ["SNAPSHOT_HEADER", "SNAPSHOT_VERSION", "decode_snapshot", "encode_snapshot"]
+__all__ = [
+    "READABLE_VERSIONS",
+    "SNAPSHOT_HEADER",
+    "SNAPSHOT_VERSION",
+    "decode_snapshot",
+    "encode_snapshot",
+]
 
-# Version 3 of the body codec (float arrays as one float64 block after the JSON), on top of the
-# state's dict format; a change of either makes old snapshots unreadable, so they are replayed
-# instead.
-SNAPSHOT_VERSION = 100 * SNAPSHOT_FORMAT_VERSION + 3
+# Body codecs on top of the state's dict format (a change of that makes every old snapshot
+# unreadable, so they are replayed instead). 3: float arrays as one float64 block after the
+# JSON; 4: the same, the tracks stored by column instead of one object per track. Version 3
+# bodies are still read; `pbdag rebuild` rewrites them in version 4.
+SNAPSHOT_VERSION = 100 * SNAPSHOT_FORMAT_VERSION + 4
+SNAPSHOT_VERSION_ROWS = 100 * SNAPSHOT_FORMAT_VERSION + 3
+READABLE_VERSIONS = frozenset({SNAPSHOT_VERSION, SNAPSHOT_VERSION_ROWS})
 FLOAT_BLOCKS = ("recent_centers", "embedding_sum")  # most of a snapshot's numbers
 SNAPSHOT_HEADER = struct.Struct("<I")  # the length of the JSON part
 SNAPSHOT_ZSTD_LEVEL = 1
+TRACK_FIELDS = tuple(f.name for f in dataclasses.fields(Track))
+_OPTIONAL_FIELDS = ("capture_id", "first_observed")  # left out of a track's dict when None
 
 
 def encode_snapshot(state: SceneState) -> bytes:
-    """Compressed snapshot body; deterministic bytes for equal states.
+    """Compressed snapshot body (version 4); deterministic bytes for equal states.
 
-    zstandard(u32 length, the state's JSON, float64 block). Each track's long float arrays
-    (`FLOAT_BLOCKS`) leave the JSON, which keeps their length, for one exact little-endian
-    float64 block after it: every track's recent centers, then every track's embedding sum, in
-    track order. Parsing decimal text of ~80k floats, or inflating base64 of them under zlib,
-    costs more than the rest of an as_of.
+    zstandard(u32 length, the state's JSON, float64 block). The JSON is the state's dict with
+    its tracks by column: `tracks` maps each Track field to the list of its values in track
+    order. Each track's long float arrays (`FLOAT_BLOCKS`) leave the JSON, which keeps their
+    length, for one exact little-endian float64 block after it: every track's recent centers,
+    then every track's embedding sum, in track order. Parsing decimal text of ~80k floats costs
+    more than the rest of an as_of; building a track from columns costs less than from its own
+    JSON object.
     """
     record = state.to_dict()
-    blocks: dict[str, list[npt.NDArray[np.float64]]] = {key: [] for key in FLOAT_BLOCKS}
-    for track in record["tracks"]:
-        for key in FLOAT_BLOCKS:
-            if track[key] is not None:
-                values = np.asarray(track[key], dtype="<f8").reshape(-1)
-                track[key] = len(values)
-                blocks[key].append(values)
+    rows = record["tracks"]
+    columns: dict[str, list[Any]] = {name: [] for name in TRACK_FIELDS}
+    for track in rows:
+        for name in _OPTIONAL_FIELDS:
+            track.setdefault(name, None)
+        for name in TRACK_FIELDS:
+            columns[name].append(track[name])
+    floats = _float_block(columns)
+    record["tracks"] = columns
     header = orjson.dumps(record)
-    arrays = [values for key in FLOAT_BLOCKS for values in blocks[key]]
-    floats = np.concatenate(arrays).tobytes() if arrays else b""
     body = SNAPSHOT_HEADER.pack(len(header)) + header + floats
     return zstandard.ZstdCompressor(level=SNAPSHOT_ZSTD_LEVEL).compress(body)
 
 
-def decode_snapshot(body: bytes) -> SceneState:
-    """Inverse of `encode_snapshot`."""
-    raw = zstandard.ZstdDecompressor().decompress(body)
+def _float_block(columns: dict[str, list[Any]]) -> bytes:
+    """The float64 block of the `FLOAT_BLOCKS` columns, each value replaced by its length."""
+    arrays: list[npt.NDArray[np.float64]] = []
+    for key in FLOAT_BLOCKS:
+        column = columns[key]
+        for index, value in enumerate(column):
+            if value is not None:
+                values = np.asarray(value, dtype="<f8").reshape(-1)
+                column[index] = len(values)
+                arrays.append(values)
+    return np.concatenate(arrays).tobytes() if arrays else b""
+
+
+def decode_snapshot(body: bytes, version: int = SNAPSHOT_VERSION) -> SceneState:
+    """Inverse of `encode_snapshot` (`version`: the body's, one of `READABLE_VERSIONS`);
+    ValueError for a body that does not hold a state."""
+    try:
+        raw = zstandard.ZstdDecompressor().decompress(body)
+    except zstandard.ZstdError as error:
+        raise ValueError(f"snapshot body is not zstandard: {error}") from None
+    if len(raw) < SNAPSHOT_HEADER.size:
+        raise ValueError("snapshot body is shorter than its header")
     (length,) = SNAPSHOT_HEADER.unpack_from(raw)
     start = SNAPSHOT_HEADER.size
     record = orjson.loads(memoryview(raw)[start : start + length])
     floats: list[float] = np.frombuffer(raw, dtype="<f8", offset=start + length).tolist()
+    if version == SNAPSHOT_VERSION_ROWS:
+        return _decode_rows(record, floats)
+    if version != SNAPSHOT_VERSION:
+        raise ValueError(f"snapshot body version {version} is not supported")
+    columns = record["tracks"]
+    if not isinstance(columns, dict) or columns.keys() != set(TRACK_FIELDS):
+        raise ValueError("snapshot tracks do not hold the track fields")
+    count = len(columns["track_id"])
+    if any(len(columns[name]) != count for name in TRACK_FIELDS):
+        raise ValueError("snapshot track columns differ in length")
+    centers, embeddings = _split(floats, columns["recent_centers"], columns["embedding_sum"])
+    columns["recent_centers"], columns["embedding_sum"] = centers, embeddings
+    columns["existence_logodds"] = list(map(float, columns["existence_logodds"]))
+    columns["center"] = list(map(tuple, columns["center"]))
+    columns["extent"] = list(map(tuple, columns["extent"]))
+    for name in ("published_center", "box"):
+        columns[name] = [None if value is None else tuple(value) for value in columns[name]]
+    names = tuple(columns)
+    tracks = {}
+    new = object.__new__
+    for row in zip(*columns.values(), strict=True):
+        track = new(Track)
+        track.__dict__.update(zip(names, row, strict=True))
+        tracks[track.track_id] = track
+    if len(tracks) != count:
+        raise ValueError("snapshot tracks repeat an id")
+    record["tracks"] = []
+    return dataclasses.replace(SceneState.from_dict(record), tracks=tracks)
+
+
+def _split(
+    floats: list[float], center_counts: list[int | None], embedding_counts: list[int | None]
+) -> tuple[list[tuple[tuple[float, float, float], ...]], list[tuple[float, ...] | None]]:
+    """Each track's recent centers and embedding sum from the float block, by their counts."""
+    centers_total = 0
+    for count in center_counts:
+        if not isinstance(count, int) or count < 0 or count % 3:
+            raise ValueError(f"snapshot track with {count} center values")
+        centers_total += count
+    embedding_total = 0
+    for count in embedding_counts:
+        if count is not None and (not isinstance(count, int) or count < 0):
+            raise ValueError(f"snapshot track with {count} embedding values")
+        embedding_total += count or 0
+    if centers_total + embedding_total != len(floats):
+        raise ValueError(f"snapshot float block of {len(floats)} values does not fit its tracks")
+    coordinates = iter(floats[:centers_total])
+    points = list(zip(coordinates, coordinates, coordinates, strict=True))
+    centers = []
+    point = 0
+    for count in center_counts:
+        assert count is not None  # checked above
+        centers.append(tuple(points[point : point + count // 3]))
+        point += count // 3
+    embeddings: list[tuple[float, ...] | None] = []
+    position = centers_total
+    for count in embedding_counts:
+        if count is None:
+            embeddings.append(None)
+        else:
+            embeddings.append(tuple(floats[position : position + count]))
+            position += count
+    return centers, embeddings
+
+
+def _decode_rows(record: dict[str, Any], floats: list[float]) -> SceneState:
+    """A version 3 body: one JSON object per track."""
     tracks = record["tracks"]
     centers_total = sum(t["recent_centers"] or 0 for t in tracks)
     if centers_total % 3 or sum(t["embedding_sum"] or 0 for t in tracks) + centers_total != len(

@@ -2,19 +2,27 @@
 
 from __future__ import annotations
 
+import math
 import struct
 from typing import Any
 
-import orjson
 import pytest
-import zstandard
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from core.evolve import fold
+from bench.perf_common import synthetic_events
+from core.events import SceneCreated
+from core.evolve import evolve, fold
+from core.params import Params
 from core.state import SceneState
-from service.store.snapshot_codec import SNAPSHOT_HEADER, decode_snapshot, encode_snapshot
+from service.store.snapshot_codec import (
+    SNAPSHOT_VERSION,
+    SNAPSHOT_VERSION_ROWS,
+    decode_snapshot,
+    encode_snapshot,
+)
 from tests.core.replay_runs import live_run, step
+from tests.service.snapshot_bodies import body_of, parts, rows_body
 
 
 @settings(max_examples=30, deadline=None)
@@ -30,49 +38,90 @@ def test_decoded_snapshot_equals_the_state_and_folds_on_alike(
     assert decoded.to_dict() == prefix.to_dict()
     assert encode_snapshot(decoded) == body  # deterministic: `pbdag rebuild` compares bytes
     assert fold(decoded, log[cut:]).to_dict() == live.to_dict()
+    older = decode_snapshot(rows_body(prefix), SNAPSHOT_VERSION_ROWS)  # version 3 still read
+    assert older == decoded and encode_snapshot(older) == body
 
 
-def _parts(body: bytes) -> tuple[dict[str, Any], bytes]:
-    raw = zstandard.ZstdDecompressor().decompress(body)
-    (length,) = SNAPSHOT_HEADER.unpack_from(raw)
-    start = SNAPSHOT_HEADER.size
-    return orjson.loads(raw[start : start + length]), raw[start + length :]
+def _benchmark_state(events: int) -> SceneState:
+    """The as_of benchmark's scene (500 tracks with 64-value appearance sums, misses)."""
+    created = SceneCreated(name="bench", params=Params().to_dict())
+    return fold(evolve(SceneState(), created), synthetic_events(events))
 
 
-def _body(header: dict[str, Any], floats: bytes) -> bytes:
-    text = orjson.dumps(header)
-    return zstandard.ZstdCompressor().compress(SNAPSHOT_HEADER.pack(len(text)) + text + floats)
+def test_a_realistic_state_comes_back_exactly_in_both_versions() -> None:
+    state = _benchmark_state(3000)
+    assert len(state.tracks) == 500
+    floats = [
+        value
+        for track in state.tracks.values()
+        for value in (*(v for c in track.recent_centers for v in c), *(track.embedding_sum or ()))
+    ]
+    assert len(floats) > 30_000 and all(math.isfinite(v) for v in floats)
+    body = encode_snapshot(state)
+    for decoded in (
+        decode_snapshot(body),
+        decode_snapshot(rows_body(state), SNAPSHOT_VERSION_ROWS),
+    ):
+        assert decoded == state  # every field of every track, float for float
+        assert decoded.to_dict() == state.to_dict()
+        assert encode_snapshot(decoded) == body
+        tail = list(synthetic_events(3400))[3000:]
+        assert fold(decoded, tail).to_dict() == fold(state, tail).to_dict()
 
 
 def test_float_arrays_leave_the_json_and_come_back_exactly() -> None:
     log, live = live_run(
         [{"mug_1": 0, "book_1": 1, "detect": {"mug_1", "book_1"}, "occlude": False}]
     )
-    header, floats = _parts(encode_snapshot(live))
-    counts = [(t["recent_centers"], t["embedding_sum"]) for t in header["tracks"]]
+    header, floats = parts(encode_snapshot(live))
+    columns = header["tracks"]
+    counts = list(zip(columns["recent_centers"], columns["embedding_sum"], strict=True))
+    assert len(counts) == len(live.tracks) == 2
     assert all(isinstance(c, int) for pair in counts for c in pair if c is not None)
     assert len(floats) == 8 * sum(c or 0 for pair in counts for c in pair)
-    assert decode_snapshot(_body(header, floats)).to_dict() == live.to_dict()
+    assert decode_snapshot(body_of(header, floats)).to_dict() == live.to_dict()
     assert len(log) > 1
 
 
-def test_a_float_block_that_does_not_fit_its_tracks_is_refused() -> None:
-    _log, live = live_run([{"mug_1": 0, "book_1": None, "detect": {"mug_1"}, "occlude": False}])
-    header, floats = _parts(encode_snapshot(live))
-    with pytest.raises(ValueError, match="does not fit"):
-        decode_snapshot(_body(header, floats[:-8]))
-    with pytest.raises(ValueError, match="does not fit"):
-        decode_snapshot(_body(header, floats + struct.pack("<d", 1.0)))
-
-
-def test_a_track_whose_centers_are_not_triples_is_refused() -> None:
+def _two_tracks() -> tuple[dict[str, Any], bytes]:
     _log, live = live_run(
         [{"mug_1": 0, "book_1": 1, "detect": {"mug_1", "book_1"}, "occlude": False}]
     )
-    header, floats = _parts(encode_snapshot(live))
-    first, second = header["tracks"][0], header["tracks"][1]
-    assert first["recent_centers"] >= 3 and second["recent_centers"] >= 3
-    first["recent_centers"] -= 1  # the total still fits the block; the split does not
-    second["recent_centers"] += 1
+    return parts(encode_snapshot(live))
+
+
+def test_a_float_block_that_does_not_fit_its_tracks_is_refused() -> None:
+    header, floats = _two_tracks()
+    with pytest.raises(ValueError, match="does not fit"):
+        decode_snapshot(body_of(header, floats[:-8]))
+    with pytest.raises(ValueError, match="does not fit"):
+        decode_snapshot(body_of(header, floats + struct.pack("<d", 1.0)))
+
+
+def test_a_track_whose_centers_are_not_triples_is_refused() -> None:
+    header, floats = _two_tracks()
+    counts = header["tracks"]["recent_centers"]
+    assert counts[0] >= 3 and counts[1] >= 3
+    counts[0] -= 1  # the total still fits the block; the split does not
+    counts[1] += 1
     with pytest.raises(ValueError, match="center values"):
-        decode_snapshot(_body(header, floats))
+        decode_snapshot(body_of(header, floats))
+
+
+def test_a_corrupt_body_is_refused() -> None:
+    header, floats = _two_tracks()
+    body = body_of(header, floats)
+    with pytest.raises(ValueError, match="not zstandard"):
+        decode_snapshot(body[: len(body) // 2])
+    missing = {**header, "tracks": {k: v for k, v in header["tracks"].items() if k != "box"}}
+    with pytest.raises(ValueError, match="track fields"):
+        decode_snapshot(body_of(missing, floats))
+    short = {**header, "tracks": {**header["tracks"], "pinned": [False]}}
+    with pytest.raises(ValueError, match="differ in length"):
+        decode_snapshot(body_of(short, floats))
+    ids = header["tracks"]["track_id"]
+    twice = {**header, "tracks": {**header["tracks"], "track_id": [ids[0], ids[0]]}}
+    with pytest.raises(ValueError, match="repeat an id"):
+        decode_snapshot(body_of(twice, floats))
+    with pytest.raises(ValueError, match="not supported"):
+        decode_snapshot(body, SNAPSHOT_VERSION + 1)
