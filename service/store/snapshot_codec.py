@@ -11,6 +11,7 @@ import numpy.typing as npt
 import orjson
 import zstandard
 
+from core.fixture_map import VoxelMap
 from core.state import SNAPSHOT_FORMAT_VERSION, SceneState, Track
 
 __all__ = [
@@ -23,8 +24,9 @@ __all__ = [
 
 # Body codecs on top of the state's dict format (a change of that makes every old snapshot
 # unreadable, so they are replayed instead). 3: float arrays as one float64 block after the
-# JSON; 4: the same, the tracks stored by column instead of one object per track. Version 3
-# bodies are still read; `pbdag rebuild` rewrites them in version 4.
+# JSON; 4: the same, the tracks stored by column instead of one object per track, and the
+# fixture voxel map as arrays after the float block. Version 3 bodies are still read; `pbdag
+# rebuild` rewrites them in version 4.
 SNAPSHOT_VERSION = 100 * SNAPSHOT_FORMAT_VERSION + 4
 SNAPSHOT_VERSION_ROWS = 100 * SNAPSHOT_FORMAT_VERSION + 3
 READABLE_VERSIONS = frozenset({SNAPSHOT_VERSION, SNAPSHOT_VERSION_ROWS})
@@ -44,9 +46,13 @@ def encode_snapshot(state: SceneState) -> bytes:
     length, for one exact little-endian float64 block after it: every track's recent centers,
     then every track's embedding sum, in track order. Parsing decimal text of ~80k floats costs
     more than the rest of an as_of; building a track from columns costs less than from its own
-    JSON object.
+    JSON object. The fixture voxel map (`voxels`) is stored last, as its arrays: the packed keys
+    (int64), the counts (int64) and the class-score sums (float64, row-major), its JSON entry
+    holding only its shape; a house's map of 100k voxels was most of the JSON, and of the time.
     """
-    record = state.to_dict()
+    voxels = state.voxels
+    record = dataclasses.replace(state, voxels=VoxelMap()).to_dict()
+    record["voxels"] = {"count": len(voxels), "width": int(voxels.sums.shape[1])}
     rows = record["tracks"]
     columns: dict[str, list[Any]] = {name: [] for name in TRACK_FIELDS}
     for track in rows:
@@ -57,7 +63,12 @@ def encode_snapshot(state: SceneState) -> bytes:
     floats = _float_block(columns)
     record["tracks"] = columns
     header = orjson.dumps(record)
-    body = SNAPSHOT_HEADER.pack(len(header)) + header + floats
+    voxel_arrays = (
+        voxels.keys.astype("<i8").tobytes()
+        + voxels.counts.astype("<i8").tobytes()
+        + voxels.sums.astype("<f8").tobytes()
+    )
+    body = SNAPSHOT_HEADER.pack(len(header)) + header + floats + voxel_arrays
     return zstandard.ZstdCompressor(level=SNAPSHOT_ZSTD_LEVEL).compress(body)
 
 
@@ -86,11 +97,13 @@ def decode_snapshot(body: bytes, version: int = SNAPSHOT_VERSION) -> SceneState:
     (length,) = SNAPSHOT_HEADER.unpack_from(raw)
     start = SNAPSHOT_HEADER.size
     record = orjson.loads(memoryview(raw)[start : start + length])
-    floats: list[float] = np.frombuffer(raw, dtype="<f8", offset=start + length).tolist()
     if version == SNAPSHOT_VERSION_ROWS:
+        floats = np.frombuffer(raw, dtype="<f8", offset=start + length).tolist()
         return _decode_rows(record, floats)
     if version != SNAPSHOT_VERSION:
         raise ValueError(f"snapshot body version {version} is not supported")
+    voxels, end = _voxel_map(raw, start + length, record.get("voxels"))
+    floats = np.frombuffer(raw[start + length : end], dtype="<f8").tolist()
     columns = record["tracks"]
     if not isinstance(columns, dict) or columns.keys() != set(TRACK_FIELDS):
         raise ValueError("snapshot tracks do not hold the track fields")
@@ -113,8 +126,27 @@ def decode_snapshot(body: bytes, version: int = SNAPSHOT_VERSION) -> SceneState:
         tracks[track.track_id] = track
     if len(tracks) != count:
         raise ValueError("snapshot tracks repeat an id")
-    record["tracks"] = []
-    return dataclasses.replace(SceneState.from_dict(record), tracks=tracks)
+    record["tracks"], record["voxels"] = [], []
+    return dataclasses.replace(SceneState.from_dict(record), tracks=tracks, voxels=voxels)
+
+
+def _voxel_map(raw: bytes, floats_start: int, shape: Any) -> tuple[VoxelMap, int]:
+    """The voxel map stored at the end of a version 4 body, and where its float block ends."""
+    if not isinstance(shape, dict) or shape.keys() != {"count", "width"}:
+        raise ValueError("snapshot voxels do not hold the map's shape")
+    count, width = shape["count"], shape["width"]
+    if not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in (count, width)):
+        raise ValueError(f"snapshot voxel map of shape {count} x {width}")
+    size = 8 * count * (2 + width)
+    end = len(raw) - size
+    if end < floats_start or (end - floats_start) % 8:
+        raise ValueError(f"snapshot voxel map of {count} voxels does not fit the body")
+    keys = np.frombuffer(raw, "<i8", count, end).astype(np.int64)
+    counts = np.frombuffer(raw, "<i8", count, end + 8 * count).astype(np.int64)
+    sums = np.frombuffer(raw, "<f8", count * width, end + 16 * count).astype(np.float64)
+    if count > 1 and not bool((keys[1:] > keys[:-1]).all()):
+        raise ValueError("snapshot voxel keys are not sorted and unique")
+    return VoxelMap(keys, counts, sums.reshape(count, width)), end
 
 
 def _split(

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 from typing import Any
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -13,6 +15,7 @@ from hypothesis import strategies as st
 from bench.perf_common import synthetic_events
 from core.events import SceneCreated
 from core.evolve import evolve, fold
+from core.fixture_map import VoxelMap
 from core.params import Params
 from core.state import SceneState
 from service.store.snapshot_codec import (
@@ -125,3 +128,40 @@ def test_a_corrupt_body_is_refused() -> None:
         decode_snapshot(body_of(twice, floats))
     with pytest.raises(ValueError, match="not supported"):
         decode_snapshot(body, SNAPSHOT_VERSION + 1)
+
+
+def _with_voxels(count: int, width: int) -> SceneState:
+    """The benchmark's scene with a fixture voxel map of `count` voxels and `width` classes."""
+    rng = np.random.default_rng(3)
+    keys = np.unique(rng.integers(0, 2**40, size=count * 2))[:count].astype(np.int64)
+    voxels = VoxelMap(keys, rng.integers(1, 50, size=count), rng.random((count, width)) * 9)
+    return dataclasses.replace(_benchmark_state(600), voxels=voxels)
+
+
+def test_the_voxel_map_comes_back_exactly_as_arrays_after_the_floats() -> None:
+    state = _with_voxels(5000, 7)
+    body = encode_snapshot(state)
+    header, tail = parts(body)
+    assert header["voxels"] == {"count": 5000, "width": 7}  # no voxel in the JSON
+    assert len(tail) >= 8 * 5000 * (2 + 7)
+    decoded = decode_snapshot(body)
+    assert decoded.voxels == state.voxels and decoded.voxels.sums.shape == (5000, 7)
+    assert decoded.to_dict() == state.to_dict()
+    assert encode_snapshot(decoded) == body
+    empty = decode_snapshot(encode_snapshot(_benchmark_state(600)))
+    assert len(empty.voxels) == 0 and empty.voxels.sums.shape == (0, 0)
+
+
+def test_a_voxel_map_that_does_not_fit_or_is_not_sorted_is_refused() -> None:
+    header, tail = parts(encode_snapshot(_with_voxels(40, 3)))
+    with pytest.raises(ValueError, match="does not fit"):
+        decode_snapshot(body_of({**header, "voxels": {"count": 10**6, "width": 3}}, tail))
+    with pytest.raises(ValueError, match="shape"):
+        decode_snapshot(body_of({**header, "voxels": [[0, 0, 0, 1, [1.0]]]}, tail))
+    with pytest.raises(ValueError, match="shape"):
+        decode_snapshot(body_of({**header, "voxels": {"count": -1, "width": 3}}, tail))
+    floats = len(tail) - 8 * 40 * 5
+    keys = bytearray(tail)
+    keys[floats : floats + 16] = keys[floats + 8 : floats + 16] + keys[floats : floats + 8]
+    with pytest.raises(ValueError, match="sorted"):
+        decode_snapshot(body_of(header, bytes(keys)))
