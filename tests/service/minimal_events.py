@@ -1,4 +1,5 @@
-"""Minimal events for store tests, and a log row as an older version wrote it."""
+"""Minimal events for store tests, a scene made through the one write path, and a log row as an
+older version wrote it."""
 
 from __future__ import annotations
 
@@ -9,9 +10,12 @@ import orjson
 import sqlalchemy as sa
 
 from core.events import Event, ObjectAdded, VisibleMiss
+from core.params import Params
 from core.values import Observation
 from service.bootstrap import Container
+from service.commands import create_scene
 from service.store.engine import write_transaction
+from service.store.event_log import SceneRecord
 from service.store.tables import events as events_table
 from service.store.tables import scenes as scenes_table
 
@@ -104,3 +108,8 @@ def append_batch(
     state = container.log.load_state(scene_id)
     with container.uow.begin() as work:
         return work.append(scene_id, state, events, batch_id=batch_id, batch_time=batch_time).seqs
+
+
+def new_scene(container: Container, name: str = "s", params: Params | None = None) -> SceneRecord:
+    """A scene through the one write path."""
+    return create_scene(container, name, params or Params())
