@@ -15,7 +15,6 @@ from core.events import InspectionRecorded, InspectionTargeted
 from core.evolve import fold
 from core.inspection import decide_inspection
 from core.navigation import Navigation
-from core.occupancy import OccupancyGrid
 from core.params import Params
 from core.planner import (
     decide_plan,
@@ -25,41 +24,16 @@ from core.planner import (
     queue_status,
     unresolved_fixtures,
 )
-from core.state import SceneState, Track, TrackChanges
+from core.state import SceneState, TrackChanges
 from core.uncertainty import TERMS, fixture_uncertainty
 from core.values import ViewPose
 from core.views import best_view, feasible_views, view_cost
 from tests.core.maps import GEOMETRY, grid_of, paint, room
+from tests.core.planner_scenes import fixture, scene
 from tests.core.scenes import frame as analytic_frame
 
 PARAMS = Params()
 ROBOT = ViewPose(x=1.02, y=1.02, yaw=0.0)  # inside the cell x, y in [1.00, 1.05)
-
-
-def fixture(
-    track_id: str,
-    center: tuple[float, float, float],
-    extent: tuple[float, float, float],
-    /,
-    **changes: Unpack[TrackChanges],
-) -> Track:
-    """A confirmed table: seen 12 times at one place (evidence 12, p 0.99999), one class, a
-    clear margin, pinned (u close to 0 unless `changes` say otherwise)."""
-    track = Track(
-        track_id=track_id,
-        kind="fixture",
-        lifecycle="confirmed",
-        class_evidence={"table": 12.0},
-        existence_logodds=4.0,
-        center=center,
-        extent=extent,
-        recent_centers=(center, center),
-        batches_observed=12,
-        margin_sum=12 * 0.3,
-        last_observed=100.0,
-        pinned=True,
-    )
-    return track.evolved(**changes)
 
 
 # -- equation (4) ------------------------------------------------------------------------------
@@ -158,15 +132,6 @@ def test_proximity_is_clipped_and_reaches_zero_at_8_m() -> None:
     assert at(6.0) == pytest.approx(0.25)
     assert at(8.0) == 0.0
     assert at(12.0) == 0.0
-
-
-def scene(grid: OccupancyGrid, *tracks: Track, clock: float = 400.0) -> SceneState:
-    return replace(
-        SceneState(head_seq=10),
-        tracks={t.track_id: t for t in tracks},
-        occupancy=grid,
-        clock=clock,
-    )
 
 
 # A 7 m x 6 m room. Fixture A (uncertain) in the east, B (settled) near the robot in the west.
