@@ -229,7 +229,7 @@ class Worker:
     def _batch(self, claim: Claim) -> Batch:
         """The claimed batch decoded: as this process's API decoded it when handed over, else
         from its stored blob."""
-        handed = None if self.handoff is None else self.handoff.take(claim.id)
+        handed = None if self.handoff is None else self.handoff.take((claim.id, claim.blob_key))
         if handed is not None:
             self.container.metrics.batches_handed_off.inc()
             return handed

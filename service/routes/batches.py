@@ -52,7 +52,9 @@ def post_batch(
     if not created:
         response.status_code = 200
     elif handoff is not None:
-        handoff.put(record.id, decoded)  # this process's worker takes it instead of decoding
+        handoff.put(
+            (record.id, record.blob_key), decoded
+        )  # this process's worker takes it instead of decoding
     logger.info(
         "batch %s %s (%d frames)",
         batch.batch_id,

@@ -42,14 +42,15 @@ def test_the_handoff_keeps_at_most_its_bytes_evicts_the_oldest_and_gives_each_ba
     assert size == 16 * 16 * 4 + batches[0].frames[0].detections[0].mask.runs.nbytes
     handoff = Handoff(2 * size)
     for row, kept in enumerate(batches):
-        handoff.put(row, kept)
+        handoff.put((row, f"blob-{row}"), kept)
     assert handoff.held_bytes == 2 * size
-    assert handoff.take(0) is None  # the oldest made room for the third
-    assert handoff.take(1) is batches[1]
-    assert handoff.take(1) is None  # taken once
+    assert handoff.take((0, "blob-0")) is None  # the oldest made room for the third
+    assert handoff.take((1, "blob-other")) is None  # the row's id alone is not the batch
+    assert handoff.take((1, "blob-1")) is batches[1]
+    assert handoff.take((1, "blob-1")) is None  # taken once
     assert handoff.held_bytes == size
-    handoff.put(7, small_batch("large", 64))  # larger than the whole bound: not kept
-    assert handoff.take(7) is None and handoff.held_bytes == size
+    handoff.put((7, "blob-7"), small_batch("large", 64))  # larger than the bound: not kept
+    assert handoff.take((7, "blob-7")) is None and handoff.held_bytes == size
 
 
 def done(client: TestClient, scene_id: str, batch_id: str) -> None:
