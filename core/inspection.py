@@ -26,7 +26,7 @@ from core.params import SUPPORT_SLAB_M, Params
 from core.state import SceneState, Track
 from core.support import SupportSurface, parents_of
 from core.values import InspectionStatus, ViewPose
-from core.visibility import Sighting, observable, samples_passed
+from core.visibility import Sighting, observable, sample_columns
 
 
 def support_region_visible(fixture: Track, frame: Frame, params: Params) -> int:
@@ -34,7 +34,7 @@ def support_region_visible(fixture: Track, frame: Frame, params: Params) -> int:
     top = fixture.center[2] + fixture.extent[2] / 2
     center = np.array([[fixture.center[0], fixture.center[1], top]])
     extent = np.array([[fixture.extent[0], fixture.extent[1], SUPPORT_SLAB_M]])
-    return samples_passed(center, extent, frame, params.visibility)[0].passed
+    return int(sample_columns(center, extent, frame, params.visibility).passed[0])
 
 
 def suppress(proposals: Sequence[Proposal], masks: Sequence[Mask], params: Params) -> list[int]:
@@ -174,15 +174,15 @@ def _held_children(
     if not held:
         return []
     boxes = [_box_of(t) for t in held]
-    sightings = samples_passed(
+    sightings = sample_columns(
         np.array([c for c, _ in boxes]),
         np.array([e for _, e in boxes]),
         frame,
         params.visibility,
         probes=np.array([t.center for t in held]),
-    )
+    ).sightings(frame.frame_id)
     return [
-        (track, sighting.seen_in(frame.frame_id))
+        (track, sighting)
         for track, sighting in zip(held, sightings, strict=True)
         if observable(sighting, params.visibility)
     ]

@@ -42,17 +42,6 @@ class Sighting:
     center_empty: bool = True
     frame_id: str = ""
 
-    def seen_in(self, frame_id: str) -> Sighting:
-        """The same sighting, naming its frame."""
-        # Built directly: dataclasses.replace costs more, and every sighting of a batch pays.
-        return Sighting(
-            passed=self.passed,
-            expected_fraction=self.expected_fraction,
-            in_image_share=self.in_image_share,
-            center_empty=self.center_empty,
-            frame_id=frame_id,
-        )
-
 
 def observable(sighting: Sighting, params: VisibilityParams, gate: bool = True) -> bool:
     """V_i(t) = 1: at least two samples pass, and (with the gate) the observable part is
@@ -109,8 +98,8 @@ def batch_visibility(
             rules.miss_evidence,
             probes=arrays.centers[rows],
         )
-        for sighting, row in _sightings(columns, rows, frame.frame_id):
-            track_id = arrays.track_ids[row]
+        for index, sighting in columns.shown(frame.frame_id):
+            track_id = arrays.track_ids[int(rows[index])]
             held = best.get(track_id)
             rank = _rank(sighting, params.visibility, rules.visibility_gate)
             if held is None or rank > _rank(held, params.visibility, rules.visibility_gate):
@@ -141,42 +130,6 @@ def in_view_rows(
     )
 
 
-def _sightings(
-    columns: SampleColumns, rows: npt.NDArray[np.intp], frame_id: str
-) -> Iterator[tuple[Sighting, int]]:
-    """The sightings of the boxes with a sample passed, each with its row, naming the frame."""
-    shown = np.flatnonzero(columns.passed)
-    for index, row in zip(shown.tolist(), rows[shown].tolist(), strict=True):
-        sighting = Sighting(
-            int(columns.passed[index]),
-            float(columns.fraction[index]),
-            float(columns.in_image_share[index]),
-            bool(columns.empty[index]),
-            frame_id,
-        )
-        yield sighting, row
-
-
-def samples_passed(
-    centers: FloatArray,
-    extents: FloatArray,
-    frame: Frame,
-    params: VisibilityParams,
-    occlusion_test: bool = True,
-    miss_evidence: MissEvidence = "visible",
-    probes: FloatArray | None = None,
-) -> list[Sighting]:
-    """For each stored box: its samples that pass in `frame`, and its observable image share
-    (`sample_columns`, one sighting per box)."""
-    columns = sample_columns(centers, extents, frame, params, occlusion_test, miss_evidence, probes)
-    return [
-        Sighting(int(p), float(f), float(i), bool(e))
-        for p, f, i, e in zip(
-            columns.passed, columns.fraction, columns.in_image_share, columns.empty, strict=True
-        )
-    ]
-
-
 class SampleColumns(NamedTuple):
     """Per stored box: samples passed, observable image share, share in the image, and
     whether the place is seen empty (one array each)."""
@@ -185,6 +138,25 @@ class SampleColumns(NamedTuple):
     fraction: FloatArray
     in_image_share: FloatArray
     empty: npt.NDArray[np.bool_]
+
+    def sighting(self, index: int, frame_id: str = "") -> Sighting:
+        """The sighting of the box at `index`, naming its frame."""
+        return Sighting(
+            int(self.passed[index]),
+            float(self.fraction[index]),
+            float(self.in_image_share[index]),
+            bool(self.empty[index]),
+            frame_id,
+        )
+
+    def sightings(self, frame_id: str = "") -> list[Sighting]:
+        """One sighting per box, in order."""
+        return [self.sighting(index, frame_id) for index in range(len(self.passed))]
+
+    def shown(self, frame_id: str) -> Iterator[tuple[int, Sighting]]:
+        """(index, sighting) of the boxes with a sample passed (the only ones a batch keeps)."""
+        for index in np.flatnonzero(self.passed).tolist():
+            yield index, self.sighting(index, frame_id)
 
 
 def sample_columns(

@@ -21,7 +21,7 @@ from core.params import Params
 from core.profiles import DEFAULT_PROFILE, EXTENDED, EXTENSIONS, PAPER, PROFILES, Extension
 from core.state import SceneState
 from core.support import SupportSurface, support_of
-from core.visibility import observable, samples_passed
+from core.visibility import observable, sample_columns
 from tests.core import handover_scenes
 from tests.core.carried_mugs import SAME_AS_A, carried
 from tests.core.fixture_scenes import fixtures_of, with_second_table, with_twin_of_another_class
@@ -181,9 +181,9 @@ def missed_detection(params: Params) -> object:
     defaults = Params().visibility
     for yaw in np.arange(0.0, 60.0, 0.25):
         view = scene_batch("turn", {}, pose=look_pose(float(yaw)))
-        [sighting] = samples_passed(
+        [sighting] = sample_columns(
             np.array([track.center]), np.array([track.extent]), view.frames[0], defaults
-        )
+        ).sightings()
         if sighting.passed >= defaults.min_samples_passed and not observable(sighting, defaults):
             return [e.details().get("evidence") for e in track_events(decide(state, view))]
     raise AssertionError("no sliver view found")

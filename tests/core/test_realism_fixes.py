@@ -22,7 +22,7 @@ from core.params import Params
 from core.rules import UpdateRules
 from core.state import SceneState, Track
 from core.track_columns import TrackColumns
-from core.visibility import observable, samples_passed
+from core.visibility import observable, sample_columns
 from tests.core.realistic import BIN, MUG, run, split_batch, split_in_two, with_scores
 from tests.core.rendered import COUNTER_VIEWS, ROOM, TABLE, TABLE_VIEWS, batches, frame, object_on
 from tests.core.scenes import (
@@ -75,9 +75,9 @@ def test_a_sliver_at_the_image_border_is_not_a_miss() -> None:
     sliver = None
     for yaw in np.arange(0.0, 60.0, 0.25):
         view = scene_batch("turn", {}, pose=look_pose(float(yaw)))
-        [sighting] = samples_passed(
+        [sighting] = sample_columns(
             np.array([track.center]), np.array([track.extent]), view.frames[0], params
-        )
+        ).sightings()
         if sighting.passed >= params.min_samples_passed and not observable(sighting, params):
             sliver = view
             break
@@ -116,13 +116,13 @@ def test_a_box_grown_beside_the_object_does_not_make_its_place_look_empty() -> N
     box_center, box_extent = low_high.mean(axis=0)[None], np.diff(low_high, axis=0)
     params = state.params.visibility
     # Along the ray to the box's centre the depth shows the wall far behind: "empty".
-    [by_box] = samples_passed(box_center, box_extent, frame_seen, params)
+    [by_box] = sample_columns(box_center, box_extent, frame_seen, params).sightings()
     assert by_box.center_empty and observable(by_box, params)
     # Along the ray to the mug's own centre it shows the mug: the detector's miss, not a
     # missing mug, and no visible miss is counted.
-    [by_center] = samples_passed(
+    [by_center] = sample_columns(
         box_center, box_extent, frame_seen, params, probes=np.array([mug.center])
-    )
+    ).sightings()
     assert not by_center.center_empty
     assert track_events(decide(state, still_there)) == []
     # Gone, its place does look empty along that ray: a visible miss.
