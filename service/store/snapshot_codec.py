@@ -103,7 +103,9 @@ def decode_snapshot(body: bytes, version: int = SNAPSHOT_VERSION) -> SceneState:
     if version != SNAPSHOT_VERSION:
         raise ValueError(f"snapshot body version {version} is not supported")
     voxels, end = _voxel_map(raw, start + length, record.get("voxels"))
-    floats = np.frombuffer(raw[start + length : end], dtype="<f8").tolist()
+    floats_start = start + length
+    float_count = (end - floats_start) // 8  # between the JSON and the voxel map, not copied
+    floats = np.frombuffer(raw, dtype="<f8", count=float_count, offset=floats_start).tolist()
     columns = record["tracks"]
     if not isinstance(columns, dict) or columns.keys() != set(TRACK_FIELDS):
         raise ValueError("snapshot tracks do not hold the track fields")
