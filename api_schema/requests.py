@@ -280,7 +280,12 @@ class InspectionIn(BaseModel):
     fixture_id: Identifier = Field(description="The confirmed fixture inspected.")
     frames: list[FrameIn] = Field(
         min_length=1,
-        description="The primary view first, then alternates (used only for retry, never fused).",
+        description=(
+            "The sweep's views, the robot's primary view first. The one grounded is the first"
+            " that shows the fixture's support region, or (inspection.primary_view"
+            " most_grounded, the default) the one of those grounding the most objects on it;"
+            " views are never fused."
+        ),
     )
     fixture_verified: bool | None = Field(
         None,

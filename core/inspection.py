@@ -1,7 +1,9 @@
 """Fixture-centered inspection capture (sections 3.2 and 3.4): ground fine objects on one fixture.
 
 One primary view is grounded; alternate views only serve as a retry when the primary does not
-show the fixture's support region. They are never fused.
+show the fixture's support region. They are never fused. Which contract-valid view is the primary
+is `InspectionParams.primary_view`: the first (the paper's reading), or the one whose grounded
+proposals resting on the fixture are the most.
 """
 
 from __future__ import annotations
@@ -85,27 +87,26 @@ def decide_inspection(
         raise StateConflict(
             f"fixture {fixture_id!r} is {fixture.lifecycle}, not confirmed", "fixture_id"
         )
-    # 1. Visibility: the primary view is the first that shows the fixture's support region; in
-    #    it, the fine nodes the ledger holds on the fixture (section 3.4).
-    primary = next(
-        (
-            f
-            for f in frames
-            if support_region_visible(fixture, f, params) >= params.inspection.min_support_samples
-        ),
-        None,
-    )
+    # 1. Visibility: the views that show the fixture's support region (contract-valid).
+    valid = [
+        f
+        for f in frames
+        if support_region_visible(fixture, f, params) >= params.inspection.min_support_samples
+    ]
     outcome: Literal["completed", "support_not_visible", "parent_rejected"] = "completed"
     if fixture_verified is False:
         outcome = "parent_rejected"  # the client's model says this is not the fixture
-    elif primary is None:
+    elif not valid:
         outcome = "support_not_visible"
     decisions: tuple[TrackDecision, ...] = ()
     children: list[str] = []
+    primary = valid[0] if valid else None
     if outcome == "completed":
-        assert primary is not None
+        # 2. The primary view and its grounded proposals on the fixture; in it, the fine
+        #    nodes the ledger holds on the fixture (section 3.4).
+        primary, chosen = _primary_view(fixture, valid, params)
         held = _held_children(state, fixture, primary, params)
-        decisions, children = _attach_children(state, fixture, primary, held, params)
+        decisions, children = _attach_children(state, fixture, chosen, held, params)
     attempts = fixture.inspection_attempts + (outcome != "completed")
     status: InspectionStatus | None = (
         "completed"
@@ -131,23 +132,57 @@ def decide_inspection(
     return [*decision_events(decisions, params), record]
 
 
-def _attach_children(
-    state: SceneState,
-    fixture: Track,
-    frame: Frame,
-    held: Sequence[tuple[Track, Sighting]],
-    params: Params,
-) -> tuple[tuple[TrackDecision, ...], list[str]]:
-    """The capture's children through the batch's stages: the primary view's grounded
-    proposals that rest on this fixture, the frame-level front end, equation (3), then the
-    lifecycle rules, where the verified capture stands in for cross-batch confirmation."""
-    # 2. Grounded proposals, same-class NMS and cross-class suppression, support on the fixture.
+def _primary_view(
+    fixture: Track, valid: Sequence[Frame], params: Params
+) -> tuple[Frame, list[Proposal]]:
+    """The primary view among the contract-valid ones (`primary_view`), with its proposals."""
+    if params.inspection.primary_view == "first":
+        return valid[0], on_fixture(fixture, valid[0], params)
+    grounded = [(frame, on_fixture(fixture, frame, params)) for frame in valid]
+    return max(grounded, key=lambda pair: objects_shown(pair[1]))  # the first of equals
+
+
+def objects_shown(proposals: Sequence[Proposal]) -> int:
+    """How many objects the proposals stand for: same-class proposals whose 3D boxes touch
+    count as one (a detector's mask split in two halves would otherwise make a view count
+    double, and the primary view would be chosen for its split masks)."""
+    group = list(range(len(proposals)))
+
+    def root(i: int) -> int:
+        while group[i] != i:
+            i = group[i]
+        return i
+
+    for i, a in enumerate(proposals):
+        for j in range(i):
+            b = proposals[j]
+            touch = np.all(np.abs(a.center - b.center) <= (a.extent + b.extent) / 2)
+            if a.label == b.label and touch:
+                group[root(i)] = root(j)
+    return len({root(i) for i in range(len(proposals))})
+
+
+def on_fixture(fixture: Track, frame: Frame, params: Params) -> list[Proposal]:
+    """The frame's grounded proposals after same-class NMS and cross-class suppression that
+    rest on the fixture."""
     surface = [SupportSurface(fixture.track_id, fixture.center, fixture.extent)]
     proposals = ground_frame(frame, params)
     masks = [frame.detections[p.detection_index].mask for p in proposals]
     kept = [proposals[i] for i in suppress(proposals, masks, params)]
     parents = parents_of(kept, surface, params.fixtures)
-    chosen = [p for p, parent in zip(kept, parents, strict=True) if parent == fixture.track_id]
+    return [p for p, parent in zip(kept, parents, strict=True) if parent == fixture.track_id]
+
+
+def _attach_children(
+    state: SceneState,
+    fixture: Track,
+    chosen: Sequence[Proposal],
+    held: Sequence[tuple[Track, Sighting]],
+    params: Params,
+) -> tuple[tuple[TrackDecision, ...], list[str]]:
+    """The capture's children through the batch's stages from the primary view's proposals
+    on this fixture: the frame-level front end, equation (3), then the lifecycle rules, where
+    the verified capture stands in for cross-batch confirmation."""
     # 3. Association: the frame-level front end (section 3.3).
     assigned = associate_capture(state, chosen, params)
     children = [track_id for _, track_id in assigned]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import orjson
 from pydantic import AfterValidator, ConfigDict, Field, TypeAdapter, ValidationError
@@ -410,6 +410,12 @@ class FixtureParams:
     # and its center is inside the fixture footprint grown by the margin.
     support_height_tolerance_m: Metres = 0.08
     support_footprint_margin_m: Metres = 0.05
+    # Not in the paper (it gives no support geometry): a fixture's top is the upper face of
+    # its highest voxel, so it is known only to within a band this deep under it (one voxel),
+    # and mask spill onto a wall or an object above the top lifts it by another; the object's
+    # bottom is measured against the band, not the face (an object on a desk whose top voxel
+    # is 0.09 m above the desk's true top). 0: against the face alone.
+    support_top_band_m: Annotated[float, Field(ge=0.0, le=0.5)] = 0.05
     # Not in the paper: among fixtures an object rests on, a published one wins over a fixture
     # hypothesis (an `on` edge names a node of the graph), then the closest top. False: the
     # closest top alone (the paper's "geometrically assigned parent").
@@ -438,6 +444,13 @@ class InspectionParams:
     min_support_samples: Count = 2  # support-region samples that must pass the visibility gate
     nms_mask_iou: Fraction = 0.5  # same-class non-maximum suppression
     cross_class_mask_iou: Fraction = 0.7  # cross-class overlap suppression
+    # Which of the sweep's contract-valid views (its support region visible) is the primary,
+    # the one view grounded (section 3.4: "one contract-valid primary view"; the paper does
+    # not say which). "first": the first, in the sweep's order (the paper's reading). Not in
+    # the paper, "most_grounded": the one whose grounded proposals resting on the fixture
+    # are the most, the first on ties (a detector that misses an object in the primary view
+    # but reports it in an alternate; still one view's proposals, never fused).
+    primary_view: Literal["first", "most_grounded"] = "most_grounded"
 
 
 @dataclass(frozen=True)

@@ -213,6 +213,20 @@ EXTENSIONS: tuple[Extension, ...] = (
         {"fixtures": {"published_parent_first": False}},
         "a second, unconfirmed hypothesis of a counter under its objects",
     ),
+    Extension(
+        "top_voxel_band",
+        "an object may rest anywhere in its fixture's top voxel",
+        "3.2 geometrically assigned parent",
+        {"fixtures": {"support_top_band_m": 0.0}},
+        "keys on a desk whose top voxel reaches 0.09 m above the desk",
+    ),
+    Extension(
+        "primary_view",
+        "the sweep's view that grounds the most is the primary",
+        "3.4 fixture-centered inspection (one contract-valid primary view)",
+        {"inspection": {"primary_view": "first"}},
+        "a mug the detector misses in the sweep's first view and reports in the next",
+    ),
 )
 
 

@@ -38,23 +38,31 @@ def support_of(
     surfaces: Sequence[SupportSurface],
     params: FixtureParams,
 ) -> str | None:
-    """The fixture whose top the object's bottom rests on, with its center over the footprint.
+    """The fixture whose top the object's bottom rests on, with its center over the footprint:
+    within the tolerance of its top face, or of the band under it (`support_top_band_m`).
 
     Among candidates, a published fixture wins over a fixture hypothesis (an `on` edge names
     a node of the graph; a second, unconfirmed hypothesis of the same counter must not take
     the objects on it), then the closest top (ties by id), so a shelf above a counter is not
     taken for the counter.
     """
-    best: tuple[bool, float, str] | None = None
+    best: tuple[bool, float, float, str] | None = None
     for surface in surfaces:
         box = footprint_of(surface.center, surface.extent, params.support_footprint_margin_m)
         if not (box[0] <= center[0] <= box[2] and box[1] <= center[1] <= box[3]):
             continue
-        gap = abs(bottom_z - surface.top_z)
-        rank = (params.published_parent_first and not surface.published, gap, surface.track_id)
+        top = surface.top_z
+        gap = max(bottom_z - top, (top - params.support_top_band_m) - bottom_z, 0.0)
+        face = abs(bottom_z - top)  # among tops the band reaches, the closest face
+        rank = (
+            params.published_parent_first and not surface.published,
+            gap,
+            face,
+            surface.track_id,
+        )
         if gap <= params.support_height_tolerance_m and (best is None or rank < best):
             best = rank
-    return None if best is None else best[2]
+    return None if best is None else best[3]
 
 
 def surface_of(

@@ -1,5 +1,6 @@
 """Two runs of one method on the same worlds, side by side: each figure of the dynamic interval
-table with its interval, and their paired difference with its interval (the worlds resampled
+table (or, for two runs of `pbdag eval active`, coarse F1 and fine P/R/F1 of one acquisition
+order) with its interval, and their paired difference with its interval (the worlds resampled
 once for both). What `python -m evaluation.compare BEFORE AFTER` prints, for a change to the
 method measured against the code before it.
 
@@ -28,6 +29,30 @@ from evaluation.methods import OURS
 from evaluation.world_intervals import DYNAMIC_FIGURES
 
 Row = Mapping[str, Any]
+Figures = Sequence[tuple[str, str, tuple[str, ...]]]
+# An active run's figures: Table 3's F1s and the fine P/R, read from its `coarse` and `fine`.
+ACTIVE_FIGURES: Figures = (
+    ("coarse_f1", "coarse F1↑", ("coarse_f1",)),
+    ("fine_precision", "fine P↑", ("fine_precision",)),
+    ("fine_recall", "fine R↑", ("fine_recall",)),
+    ("fine_f1", "fine F1↑", ("fine_f1",)),
+)
+ACTIVE_DEFAULT = "pbdag"  # the order compared in an active run unless --method names another
+
+
+def active_rows(runs: Sequence[Row]) -> list[dict[str, Any]]:
+    """An active results.json's rollouts in the shape `paired_runs` reads: the acquisition
+    order is the method, and Table 3's figures are flat fields."""
+    return [
+        {
+            "scenario": r["scenario"],
+            "seed": r["seed"],
+            "method": r["order"],
+            "coarse_f1": r["coarse"]["f1"],
+            **{f"fine_{key}": r["fine"][key] for key in ("precision", "recall", "f1")},
+        }
+        for r in runs
+    ]
 
 
 def paired_runs(before: Sequence[Row], after: Sequence[Row], method: str) -> list[tuple[Row, Row]]:
@@ -44,10 +69,12 @@ def paired_runs(before: Sequence[Row], after: Sequence[Row], method: str) -> lis
     return [(first[key], second[key]) for key in sorted(first.keys() & second.keys())]
 
 
-def compared(pairs: Sequence[tuple[Row, Row]]) -> list[tuple[str, Interval, Interval, Interval]]:
+def compared(
+    pairs: Sequence[tuple[Row, Row]], figures: Figures = DYNAMIC_FIGURES
+) -> list[tuple[str, Interval, Interval, Interval]]:
     """(figure, before, after, after - before) for every figure both runs hold."""
     table = []
-    for _, title, fields in DYNAMIC_FIGURES:
+    for _, title, fields in figures:
         if any(field not in row for pair in pairs for row in pair for field in fields):
             continue
         sides = [[pair[side] for pair in pairs] for side in (0, 1)]
@@ -87,21 +114,32 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("before", type=Path, help="results.json of the code before the change")
     parser.add_argument("after", type=Path, help="results.json of the code after it")
-    parser.add_argument("--method", default=OURS, help=f"the method compared (default: {OURS})")
+    parser.add_argument(
+        "--method",
+        default=None,
+        help=f"the method compared (default: {OURS}; of active runs, the order {ACTIVE_DEFAULT})",
+    )
     parser.add_argument("--out", type=Path, default=None, help="also write the table here")
     args = parser.parse_args(argv)
-    runs = []
+    runs, protocols = [], set()
     for path in (args.before, args.after):
         try:
-            runs.append(json.loads(path.read_text(encoding="utf-8"))["runs"])
-        except (OSError, ValueError, KeyError, TypeError) as error:
+            results = json.loads(path.read_text(encoding="utf-8"))
+            protocol = results.get("protocol")
+            runs.append(active_rows(results["runs"]) if protocol == "active" else results["runs"])
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as error:
             reason = f"no {error} key" if isinstance(error, KeyError) else str(error)
             message = f"compare: {path}: not a results.json of `pbdag eval` ({reason})"
             raise SystemExit(message) from None
-    pairs = paired_runs(runs[0], runs[1], args.method)
+        protocols.add("active" if protocol == "active" else "dynamic")
+    if len(protocols) > 1:
+        raise SystemExit("compare: one file is of `pbdag eval active`, the other is not")
+    active = protocols == {"active"}
+    method = args.method or (ACTIVE_DEFAULT if active else OURS)
+    pairs = paired_runs(runs[0], runs[1], method)
     if not pairs:
-        raise SystemExit(f"no run of {args.method!r} on the same world and seed in both files")
-    text = markdown(compared(pairs), len(pairs))
+        raise SystemExit(f"no run of {method!r} on the same world and seed in both files")
+    text = markdown(compared(pairs, ACTIVE_FIGURES if active else DYNAMIC_FIGURES), len(pairs))
     print(text, end="")
     if args.out is not None:
         args.out.write_text(text, encoding="utf-8")

@@ -3,15 +3,20 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
+import numpy as np
 import pytest
 
 from core.baseline import decide_freeze, decide_load, package_sha256
 from core.decide import decide
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
 from core.evolve import fold
-from core.inspection import decide_inspection
+from core.geometry import Proposal
+from core.inspection import decide_inspection, objects_shown
+from core.observation import Detection, Frame
+from core.params import Params
 from core.state import SceneState, Track
 from core.values import Vec3
 from core.verification import decide_verdict
@@ -106,6 +111,46 @@ def test_inspection_grounds_children_on_the_fixture_only() -> None:
     for count, event in enumerate(events, start=1):
         assert event.track_id is not None
         assert fold(state, events[:count]).tracks[event.track_id].lifecycle == event.state
+
+
+def test_the_primary_view_is_the_valid_view_that_grounds_the_most() -> None:
+    state = discover()
+    table = fixture(state, "table")
+    world = ROOM.with_object(object_on(TABLE, "book", "book", (0.2, 0.15, 0.05), at=(-0.3, 0.1)))
+    eye, target = (2.0, 1.2, 1.5), (2.0, 2.0, 0.75)
+    away = frame(world, eye, (2.0, -2.0, 0.75), "away")  # the table's top out of view
+    missed = frame(world, eye, target, "missed", objects=False)  # the detector saw nothing
+    both = frame(world, eye, target, "both")
+    mug_only = replace(both, frame_id="mug", detections=_without(both, "book"))
+    sweep = [away, missed, mug_only, both]
+    extended = decide_inspection(state, "cap-1", table.track_id, sweep, True)[-1].details()
+    assert extended["primary_frame"] == "both" and len(extended["children"]) == 2
+    # Ties go to the first: a view as good as a later one is not passed over.
+    twin = replace(both, frame_id="twin")
+    tied = decide_inspection(state, "cap-1", table.track_id, [missed, twin, both], True)
+    assert tied[-1].details()["primary_frame"] == "twin"
+    # The paper's reading: the first view that shows the support region, whatever it grounds.
+    paper = replace(state, params=Params.from_dict({"inspection": {"primary_view": "first"}}))
+    first = decide_inspection(paper, "cap-1", table.track_id, sweep, True)[-1].details()
+    assert first["primary_frame"] == "missed" and first["children"] == []
+
+
+def test_a_view_s_objects_count_a_mask_split_in_two_once() -> None:
+    def proposal(label: str, x: float, width: float = 0.05) -> Proposal:
+        center, extent = np.array([x, 0.0, 0.8]), np.array([width, 0.08, 0.1])
+        return Proposal(label, 0.9, "object", center, extent, None, 100, "f", 0.0, 0.75)
+
+    halves = [proposal("mug", 0.0), proposal("mug", 0.045)]  # boxes overlapping by 5 mm
+    assert objects_shown(halves) == 1
+    assert objects_shown([*halves, proposal("mug", 0.3)]) == 2  # another mug 0.3 m along
+    assert objects_shown([proposal("mug", 0.0), proposal("book", 0.045)]) == 2  # two classes
+    # A chain of touching pieces is one object; nothing is none.
+    assert objects_shown([proposal("mug", 0.0), proposal("mug", 0.09), proposal("mug", 0.045)]) == 1
+    assert objects_shown([]) == 0
+
+
+def _without(view: Frame, label: str) -> tuple[Detection, ...]:
+    return tuple(d for d in view.detections if d.label != label)
 
 
 def test_inspection_refuses_what_is_not_a_confirmed_fixture() -> None:

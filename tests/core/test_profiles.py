@@ -17,6 +17,7 @@ from core.evolve import fold
 from core.fixture_association import compatible
 from core.fixtures import FixtureProposal
 from core.geometry import Proposal
+from core.inspection import decide_inspection
 from core.params import Params
 from core.profiles import DEFAULT_PROFILE, EXTENDED, EXTENSIONS, PAPER, PROFILES, Extension
 from core.state import SceneState
@@ -242,6 +243,25 @@ def unrefuted_rivals(params: Params) -> object:
     return state.tracks[first["mug_2"]].lifecycle
 
 
+def top_voxel_band(params: Params) -> object:
+    # A desk whose top voxel reaches 0.84 m, keys resting at 0.75 m (0.09 m under its face).
+    desk = [SupportSurface("trk-000001", (0.4, 1.6, 0.42), (0.8, 1.5, 0.84))]
+    return support_of((0.6, 1.5, 0.76), 0.75, desk, params.fixtures)
+
+
+def primary_view(params: Params) -> object:
+    # The table discovered, then a sweep whose first view the object detector missed entirely
+    # and whose second view reports the mug.
+    state = SceneState(params=params)
+    for batch in batches(ROOM, TABLE_VIEWS * 2, "b", objects=False):
+        state = fold(state, decide(state, batch))
+    table = next(t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table")
+    eye, target = (2.0, 1.2, 1.5), (2.0, 2.0, 0.75)
+    sweep = [frame(ROOM, eye, target, "s0", objects=False), frame(ROOM, eye, target, "s1")]
+    record = decide_inspection(state, "cap-1", table.track_id, sweep, True)[-1]
+    return (record.details()["primary_frame"], len(record.details()["children"]))
+
+
 # name -> (witness, outcome with the extension on, outcome with it off)
 WITNESSES: dict[str, tuple[Outcome, object, object]] = {
     "fragment_rule": (fragment_rule, 0, 1),
@@ -264,6 +284,8 @@ WITNESSES: dict[str, tuple[Outcome, object, object]] = {
     "place_corroboration": (place_corroboration, 1.0, 1.5),
     "stale_retirement": (stale_retirement, ["retire"], []),
     "published_parent": (published_parent, "trk-000001", "trk-000002"),
+    "top_voxel_band": (top_voxel_band, "trk-000001", None),
+    "primary_view": (primary_view, ("s1", 1), ("s0", 0)),
 }
 # The visibility gate's conditions are judged against the paper's gate alone (the gate
 # ablation's second reading); every other extension is left out of the extended profile.

@@ -25,3 +25,27 @@ def test_the_closest_top_wins_among_published_fixtures_within_the_tolerance() ->
     assert support_of(book, 1.40, [COUNTER, SHELF], PARAMS) == SHELF.track_id
     assert support_of((7.6, 3.0, 0.95), 0.90, [COUNTER, SHELF], PARAMS) == COUNTER.track_id
     assert support_of((9.0, 3.0, 0.95), 0.90, [COUNTER, SHELF], PARAMS) is None  # off both
+
+
+def test_the_gap_is_measured_to_the_band_under_the_top_face() -> None:
+    # The counter's top face is at 0.90; its band (one voxel) reaches down to 0.85.
+    band, tolerance = PARAMS.support_top_band_m, PARAMS.support_height_tolerance_m
+    assert (band, tolerance) == (0.05, 0.08)
+    under = 0.90 - band - tolerance
+    assert support_of((7.6, 3.0, 0.8), under + 0.005, [COUNTER], PARAMS) == COUNTER.track_id
+    assert support_of((7.6, 3.0, 0.8), under - 0.005, [COUNTER], PARAMS) is None
+    # Above the face the band adds nothing.
+    assert support_of((7.6, 3.0, 1.0), 0.90 + tolerance - 0.005, [COUNTER], PARAMS) is not None
+    assert support_of((7.6, 3.0, 1.0), 0.90 + tolerance + 0.005, [COUNTER], PARAMS) is None
+    # Without the band, the face alone: 0.09 m under it is off the counter.
+    face_only = Params.from_dict({"fixtures": {"support_top_band_m": 0.0}}).fixtures
+    assert support_of((7.6, 3.0, 0.8), 0.81, [COUNTER], PARAMS) == COUNTER.track_id
+    assert support_of((7.6, 3.0, 0.8), 0.81, [COUNTER], face_only) is None
+
+
+def test_two_tops_the_band_reaches_go_to_the_closer_face() -> None:
+    # The counter's face at 0.90 and a second published fixture's at 0.94: an object resting
+    # at 0.895 is inside both bands and goes to the face 0.5 cm away, not the one 4.5 cm away.
+    higher = SupportSurface("trk-000001", (7.6, 3.0, 0.47), (0.6, 2.6, 0.94), published=True)
+    assert support_of((7.6, 3.0, 0.95), 0.895, [higher, COUNTER], PARAMS) == COUNTER.track_id
+    assert support_of((7.6, 3.0, 0.95), 0.935, [higher, COUNTER], PARAMS) == higher.track_id

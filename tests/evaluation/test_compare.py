@@ -60,3 +60,41 @@ def test_a_file_that_is_not_a_results_json_is_one_line_naming_it(tmp_path: Path)
         main([str(other), str(other)])
     with pytest.raises(SystemExit, match=r"missing\.json: not a results\.json"):
         main([str(tmp_path / "missing.json"), str(other)])
+
+
+def rollout(
+    world: str, order: str, coarse_f1: float, fine: tuple[float, float, float]
+) -> dict[str, object]:
+    precision, recall, f1 = fine
+    return {
+        "scenario": world,
+        "seed": 7,
+        "order": order,
+        "coarse": {"f1": coarse_f1},
+        "fine": {"precision": precision, "recall": recall, "f1": f1},
+    }
+
+
+def test_two_active_runs_compare_one_order_s_table_3_figures(tmp_path: Path) -> None:
+    before = [
+        rollout("a", "pbdag", 0.9, (0.8, 0.5, 0.6)),
+        rollout("b", "pbdag", 0.8, (1, 0.5, 0.7)),
+    ]
+    after = [rollout("a", "pbdag", 0.9, (0.8, 0.7, 0.75)), rollout("b", "nearest", 0.1, (0, 0, 0))]
+    after.append(rollout("b", "pbdag", 0.8, (1.0, 0.6, 0.8)))
+    paths = []
+    for name, runs in (("before", before), ("after", after)):
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({"protocol": "active", "runs": runs}), encoding="utf-8")
+        paths.append(str(path))
+    out = tmp_path / "table.md"
+    main([*paths, "--out", str(out)])  # the pbdag order by default
+    text = out.read_text(encoding="utf-8")
+    assert "| fine F1↑ | .650" in text and "| +.125" in text
+    assert "| coarse F1↑ | .850" in text and "IDF1" not in text
+    with pytest.raises(SystemExit, match="no run of 'nearest'"):  # an order only one ran
+        main([*paths, "--method", "nearest"])
+    dynamic = tmp_path / "dynamic.json"
+    dynamic.write_text(json.dumps({"protocol": "dynamic", "runs": BEFORE}), encoding="utf-8")
+    with pytest.raises(SystemExit, match="one file is of `pbdag eval active`"):
+        main([paths[0], str(dynamic)])
