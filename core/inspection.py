@@ -1,9 +1,8 @@
 """Fixture-centered inspection capture (sections 3.2 and 3.4): ground fine objects on one fixture.
 
 One primary view is grounded; alternate views only serve as a retry when the primary does not
-show the fixture's support region. They are never fused. Which contract-valid view is the primary
-is `InspectionParams.primary_view`: the first (the paper's reading), or the one whose grounded
-proposals resting on the fixture are the most.
+show the fixture's support region. They are never fused. Which contract-valid view is the
+primary, and whether the views vote on the labels, is `core.sweep`.
 """
 
 from __future__ import annotations
@@ -20,13 +19,11 @@ from core.events import Event, InspectionRecorded
 from core.existence import capture_updates
 from core.frontend import associate_capture
 from core.geometry import Proposal
-from core.grounding import ground_frame
 from core.lifecycle import capture_decisions
-from core.masks import Mask, mask_iou
 from core.observation import Frame
 from core.params import SUPPORT_SLAB_M, Params
 from core.state import SceneState, Track
-from core.support import SupportSurface, parents_of
+from core.sweep import sweep_proposals
 from core.values import InspectionStatus, ViewPose
 from core.visibility import Sighting, observable, sample_columns
 
@@ -37,27 +34,6 @@ def support_region_visible(fixture: Track, frame: Frame, params: Params) -> int:
     center = np.array([[fixture.center[0], fixture.center[1], top]])
     extent = np.array([[fixture.extent[0], fixture.extent[1], SUPPORT_SLAB_M]])
     return int(sample_columns(center, extent, frame, params.visibility).passed[0])
-
-
-def suppress(proposals: Sequence[Proposal], masks: Sequence[Mask], params: Params) -> list[int]:
-    """Indices kept by same-class NMS and cross-class overlap suppression (by mask IoU)."""
-    order = sorted(range(len(proposals)), key=lambda i: (-proposals[i].score, i))
-    kept: list[int] = []
-    for i in order:
-        clash = False
-        for k in kept:
-            iou = mask_iou(masks[i], masks[k])
-            limit = (
-                params.inspection.nms_mask_iou
-                if proposals[i].label == proposals[k].label
-                else params.inspection.cross_class_mask_iou
-            )
-            if iou > limit:
-                clash = True
-                break
-        if not clash:
-            kept.append(i)
-    return sorted(kept)
 
 
 def decide_inspection(
@@ -104,7 +80,7 @@ def decide_inspection(
     if outcome == "completed":
         # 2. The primary view and its grounded proposals on the fixture; in it, the fine
         #    nodes the ledger holds on the fixture (section 3.4).
-        primary, chosen = _primary_view(fixture, valid, params)
+        primary, chosen = sweep_proposals(fixture, valid, params)
         held = _held_children(state, fixture, primary, params)
         decisions, children = _attach_children(state, fixture, chosen, held, params)
     attempts = fixture.inspection_attempts + (outcome != "completed")
@@ -130,47 +106,6 @@ def decide_inspection(
         view=view,
     )
     return [*decision_events(decisions, params), record]
-
-
-def _primary_view(
-    fixture: Track, valid: Sequence[Frame], params: Params
-) -> tuple[Frame, list[Proposal]]:
-    """The primary view among the contract-valid ones (`primary_view`), with its proposals."""
-    if params.inspection.primary_view == "first":
-        return valid[0], on_fixture(fixture, valid[0], params)
-    grounded = [(frame, on_fixture(fixture, frame, params)) for frame in valid]
-    return max(grounded, key=lambda pair: objects_shown(pair[1]))  # the first of equals
-
-
-def objects_shown(proposals: Sequence[Proposal]) -> int:
-    """How many objects the proposals stand for: same-class proposals whose 3D boxes touch
-    count as one (a detector's mask split in two halves would otherwise make a view count
-    double, and the primary view would be chosen for its split masks)."""
-    group = list(range(len(proposals)))
-
-    def root(i: int) -> int:
-        while group[i] != i:
-            i = group[i]
-        return i
-
-    for i, a in enumerate(proposals):
-        for j in range(i):
-            b = proposals[j]
-            touch = np.all(np.abs(a.center - b.center) <= (a.extent + b.extent) / 2)
-            if a.label == b.label and touch:
-                group[root(i)] = root(j)
-    return len({root(i) for i in range(len(proposals))})
-
-
-def on_fixture(fixture: Track, frame: Frame, params: Params) -> list[Proposal]:
-    """The frame's grounded proposals after same-class NMS and cross-class suppression that
-    rest on the fixture."""
-    surface = [SupportSurface(fixture.track_id, fixture.center, fixture.extent)]
-    proposals = ground_frame(frame, params)
-    masks = [frame.detections[p.detection_index].mask for p in proposals]
-    kept = [proposals[i] for i in suppress(proposals, masks, params)]
-    parents = parents_of(kept, surface, params.fixtures)
-    return [p for p, parent in zip(kept, parents, strict=True) if parent == fixture.track_id]
 
 
 def _attach_children(

@@ -227,6 +227,13 @@ EXTENSIONS: tuple[Extension, ...] = (
         {"inspection": {"primary_view": "first"}},
         "a mug the detector misses in the sweep's first view and reports in the next",
     ),
+    Extension(
+        "sweep_class_votes",
+        "the sweep's views vote on each object's label",
+        "3.4 fixture-centered inspection (alternates not fused)",
+        {"inspection": {"sweep_class_votes": False}},
+        "a mug labelled cup in one view of the sweep and mug in the other two",
+    ),
 )
 
 

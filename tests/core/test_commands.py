@@ -6,15 +6,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any
 
-import numpy as np
 import pytest
 
 from core.baseline import decide_freeze, decide_load, package_sha256
 from core.decide import decide
 from core.errors import InvalidCommand, StateConflict, UnknownTrack
 from core.evolve import fold
-from core.geometry import Proposal
-from core.inspection import decide_inspection, objects_shown
+from core.inspection import decide_inspection
 from core.observation import Detection, Frame
 from core.params import Params
 from core.state import SceneState, Track
@@ -133,20 +131,6 @@ def test_the_primary_view_is_the_valid_view_that_grounds_the_most() -> None:
     paper = replace(state, params=Params.from_dict({"inspection": {"primary_view": "first"}}))
     first = decide_inspection(paper, "cap-1", table.track_id, sweep, True)[-1].details()
     assert first["primary_frame"] == "missed" and first["children"] == []
-
-
-def test_a_view_s_objects_count_a_mask_split_in_two_once() -> None:
-    def proposal(label: str, x: float, width: float = 0.05) -> Proposal:
-        center, extent = np.array([x, 0.0, 0.8]), np.array([width, 0.08, 0.1])
-        return Proposal(label, 0.9, "object", center, extent, None, 100, "f", 0.0, 0.75)
-
-    halves = [proposal("mug", 0.0), proposal("mug", 0.045)]  # boxes overlapping by 5 mm
-    assert objects_shown(halves) == 1
-    assert objects_shown([*halves, proposal("mug", 0.3)]) == 2  # another mug 0.3 m along
-    assert objects_shown([proposal("mug", 0.0), proposal("book", 0.045)]) == 2  # two classes
-    # A chain of touching pieces is one object; nothing is none.
-    assert objects_shown([proposal("mug", 0.0), proposal("mug", 0.09), proposal("mug", 0.045)]) == 1
-    assert objects_shown([]) == 0
 
 
 def _without(view: Frame, label: str) -> tuple[Detection, ...]:

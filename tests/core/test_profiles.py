@@ -262,6 +262,24 @@ def primary_view(params: Params) -> object:
     return (record.details()["primary_frame"], len(record.details()["children"]))
 
 
+def sweep_class_votes(params: Params) -> object:
+    # A sweep of three views of the table, the mug labelled cup in the first (the primary).
+    state = SceneState(params=params)
+    for batch in batches(ROOM, TABLE_VIEWS * 2, "b", objects=False):
+        state = fold(state, decide(state, batch))
+    table = next(t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table")
+    eye, target = (2.0, 1.2, 1.5), (2.0, 2.0, 0.75)
+    sweep = [frame(ROOM, eye, target, f"s{i}") for i in range(3)]
+    cup = tuple(
+        replace(d, label="cup", class_scores=None) if d.label == "mug" else d
+        for d in sweep[0].detections
+    )
+    sweep[0] = replace(sweep[0], detections=cup)
+    events = decide_inspection(state, "cap-1", table.track_id, sweep, True)
+    (child,) = events[-1].details()["children"]
+    return fold(state, events).tracks[child].label
+
+
 # name -> (witness, outcome with the extension on, outcome with it off)
 WITNESSES: dict[str, tuple[Outcome, object, object]] = {
     "fragment_rule": (fragment_rule, 0, 1),
@@ -286,6 +304,7 @@ WITNESSES: dict[str, tuple[Outcome, object, object]] = {
     "published_parent": (published_parent, "trk-000001", "trk-000002"),
     "top_voxel_band": (top_voxel_band, "trk-000001", None),
     "primary_view": (primary_view, ("s1", 1), ("s0", 0)),
+    "sweep_class_votes": (sweep_class_votes, "mug", "cup"),
 }
 # The visibility gate's conditions are judged against the paper's gate alone (the gate
 # ablation's second reading); every other extension is left out of the extended profile.
