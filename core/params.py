@@ -448,8 +448,9 @@ class InspectionParams:
     # the one view grounded (section 3.4: "one contract-valid primary view"; the paper does
     # not say which). "first": the first, in the sweep's order (the paper's reading). Not in
     # the paper, "most_grounded": the one whose grounded proposals resting on the fixture
-    # stand for the most objects, the first on ties (a detector that misses an object in the
-    # primary view but reports it in an alternate; still one view's proposals, never fused).
+    # stand for the most objects another valid view corroborates, then the most objects, the
+    # first on ties (a detector that misses an object in the primary view but reports it in an
+    # alternate; still one view's proposals, never fused; `core.sweep.objects_shown`).
     primary_view: Literal["first", "most_grounded"] = "most_grounded"
     # Not in the paper: each proposal of the primary view takes the label most of the valid
     # views give the object there, the primary's own on ties (a mug labelled cup in one view

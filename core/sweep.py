@@ -6,8 +6,9 @@ contract-valid when it shows the fixture's support region. Two extensions read t
 without fusing their geometry:
 
 - `InspectionParams.primary_view` "most_grounded": the primary is the valid view whose
-  proposals on the fixture stand for the most objects, not the first (the detector missed an
-  object in the first view and reported it in the next);
+  proposals on the fixture stand for the most objects another valid view corroborates, then
+  the most objects, not the first (the detector missed an object in the first view and
+  reported it in the next);
 - `InspectionParams.sweep_class_votes`: each proposal of the primary takes the label most of the
   valid views give the object there (a mug labelled cup in one view of three). Its position,
   extent, mask and appearance stay the primary's.
@@ -73,7 +74,11 @@ def sweep_proposals(
     grounded = [(frame, on_fixture(fixture, frame, params)) for frame in valid]
     index = 0
     if settings.primary_view == "most_grounded":
-        counts = [objects_shown(proposals) for _, proposals in grounded]
+        views = [proposals for _, proposals in grounded]
+        counts = [
+            (objects_shown(p, [o for k, o in enumerate(views) if k != i]), objects_shown(p))
+            for i, p in enumerate(views)
+        ]
         index = counts.index(max(counts))  # the first of equals
     primary, chosen = grounded[index]
     if settings.sweep_class_votes:
@@ -86,10 +91,18 @@ def _touch(a: Proposal, b: Proposal) -> bool:
     return bool(np.all(np.abs(a.center - b.center) <= (a.extent + b.extent) / 2))
 
 
-def objects_shown(proposals: Sequence[Proposal]) -> int:
+def objects_shown(
+    proposals: Sequence[Proposal], others: Sequence[Sequence[Proposal]] | None = None
+) -> int:
     """How many objects the proposals stand for: same-class proposals whose 3D boxes touch
     count as one (a detector's mask split in two halves would otherwise make a view count
-    double, and the primary view would be chosen for its split masks)."""
+    double, and the primary view would be chosen for its split masks).
+
+    With `others` (the sweep's other valid views), only the objects one of them corroborates:
+    a proposal of another view, of any label, touches one of the object's. A false positive
+    of one view is not seen again from a few degrees away; counted, the view that happened to
+    have the most of them would be chosen for them.
+    """
     group = list(range(len(proposals)))
 
     def root(i: int) -> int:
@@ -101,7 +114,10 @@ def objects_shown(proposals: Sequence[Proposal]) -> int:
         for j in range(i):
             if a.label == proposals[j].label and _touch(a, proposals[j]):
                 group[root(i)] = root(j)
-    return len({root(i) for i in range(len(proposals))})
+    if others is None:
+        return len({root(i) for i in range(len(proposals))})
+    seen = [any(_touch(p, o) for view in others for o in view) for p in proposals]
+    return len({root(i) for i in range(len(proposals)) if seen[i]})
 
 
 def class_votes(

@@ -48,3 +48,12 @@ def test_an_alternate_proposal_votes_for_the_nearest_primary_proposal_it_touches
     alternates = [[proposal("cup", 0.06)], [proposal("cup", 0.065)]]  # touching both
     first, second = class_votes(primary, alternates)
     assert (first.label, second.label) == ("mug", "cup")
+
+
+def test_only_objects_another_view_corroborates_count_when_the_views_are_given() -> None:
+    view = [proposal("mug", 0.0), proposal("mug", 0.045), proposal("cup", 0.5)]  # halves, a cup
+    assert objects_shown(view) == 2
+    assert objects_shown(view, [[proposal("bowl", 0.09)]]) == 1  # a piece seen again: the mug
+    assert objects_shown(view, [[proposal("cup", 0.5)], [proposal("mug", 0.0)]]) == 2
+    assert objects_shown(view, [[proposal("cup", 1.5)], []]) == 0  # nothing seen again
+    assert objects_shown(view, []) == 0
