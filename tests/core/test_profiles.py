@@ -22,6 +22,7 @@ from core.params import Params
 from core.profiles import DEFAULT_PROFILE, EXTENDED, EXTENSIONS, PAPER, PROFILES, Extension
 from core.state import SceneState
 from core.support import SupportSurface, support_of
+from core.values import Vec3
 from core.visibility import observable, sample_columns
 from tests.core import handover_scenes
 from tests.core.carried_mugs import SAME_AS_A, carried
@@ -249,33 +250,33 @@ def top_voxel_band(params: Params) -> object:
     return support_of((0.6, 1.5, 0.76), 0.75, desk, params.fixtures)
 
 
-def primary_view(params: Params) -> object:
-    # The table discovered, then a sweep whose first view the object detector missed entirely
-    # and whose second view reports the mug.
+def table_sweep(params: Params) -> tuple[SceneState, str, tuple[Vec3, Vec3]]:
+    """The table discovered without object masks, its id, and a view of its top for a sweep."""
     state = SceneState(params=params)
     for batch in batches(ROOM, TABLE_VIEWS * 2, "b", objects=False):
         state = fold(state, decide(state, batch))
     table = next(t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table")
-    eye, target = (2.0, 1.2, 1.5), (2.0, 2.0, 0.75)
+    return state, table.track_id, ((2.0, 1.2, 1.5), (2.0, 2.0, 0.75))
+
+
+def primary_view(params: Params) -> object:
+    # A sweep whose first view the object detector missed entirely, the second reporting the mug.
+    state, table, (eye, target) = table_sweep(params)
     sweep = [frame(ROOM, eye, target, "s0", objects=False), frame(ROOM, eye, target, "s1")]
-    record = decide_inspection(state, "cap-1", table.track_id, sweep, True)[-1]
+    record = decide_inspection(state, "cap-1", table, sweep, True)[-1]
     return (record.details()["primary_frame"], len(record.details()["children"]))
 
 
 def sweep_class_votes(params: Params) -> object:
     # A sweep of three views of the table, the mug labelled cup in the first (the primary).
-    state = SceneState(params=params)
-    for batch in batches(ROOM, TABLE_VIEWS * 2, "b", objects=False):
-        state = fold(state, decide(state, batch))
-    table = next(t for t in state.tracks.values() if t.kind == "fixture" and t.label == "table")
-    eye, target = (2.0, 1.2, 1.5), (2.0, 2.0, 0.75)
+    state, table, (eye, target) = table_sweep(params)
     sweep = [frame(ROOM, eye, target, f"s{i}") for i in range(3)]
     cup = tuple(
         replace(d, label="cup", class_scores=None) if d.label == "mug" else d
         for d in sweep[0].detections
     )
     sweep[0] = replace(sweep[0], detections=cup)
-    events = decide_inspection(state, "cap-1", table.track_id, sweep, True)
+    events = decide_inspection(state, "cap-1", table, sweep, True)
     (child,) = events[-1].details()["children"]
     return fold(state, events).tracks[child].label
 
