@@ -450,7 +450,7 @@ class InspectionParams:
     # the paper, "most_grounded": the one whose grounded proposals resting on the fixture
     # stand for the most objects another valid view corroborates, then the most objects, the
     # first on ties (a detector that misses an object in the primary view but reports it in an
-    # alternate; still one view's proposals, never fused; `core.sweep.objects_shown`).
+    # alternate; still one view's proposals, never fused; `core.sweep.view_score`).
     primary_view: Literal["first", "most_grounded"] = "most_grounded"
     # Not in the paper: each proposal of the primary view takes the label most of the valid
     # views give the object there, the primary's own on ties (a mug labelled cup in one view

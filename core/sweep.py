@@ -21,6 +21,8 @@ from collections.abc import Sequence
 from dataclasses import replace
 
 import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import connected_components
 
 from core.geometry import Proposal
 from core.grounding import ground_frame
@@ -75,11 +77,8 @@ def sweep_proposals(
     index = 0
     if settings.primary_view == "most_grounded":
         views = [proposals for _, proposals in grounded]
-        counts = [
-            (objects_shown(p, [o for k, o in enumerate(views) if k != i]), objects_shown(p))
-            for i, p in enumerate(views)
-        ]
-        index = counts.index(max(counts))  # the first of equals
+        scores = [view_score(p, views[:i] + views[i + 1 :]) for i, p in enumerate(views)]
+        index = scores.index(max(scores))  # the first of equals
     primary, chosen = grounded[index]
     if settings.sweep_class_votes:
         alternates = [proposals for k, (_, proposals) in enumerate(grounded) if k != index]
@@ -91,33 +90,23 @@ def _touch(a: Proposal, b: Proposal) -> bool:
     return bool(np.all(np.abs(a.center - b.center) <= (a.extent + b.extent) / 2))
 
 
-def objects_shown(
-    proposals: Sequence[Proposal], others: Sequence[Sequence[Proposal]] | None = None
-) -> int:
-    """How many objects the proposals stand for: same-class proposals whose 3D boxes touch
-    count as one (a detector's mask split in two halves would otherwise make a view count
-    double, and the primary view would be chosen for its split masks).
+def view_score(
+    proposals: Sequence[Proposal], others: Sequence[Sequence[Proposal]]
+) -> tuple[int, int]:
+    """(objects another valid view corroborates, objects) of one view's proposals.
 
-    With `others` (the sweep's other valid views), only the objects one of them corroborates:
-    a proposal of another view, of any label, touches one of the object's. A false positive
-    of one view is not seen again from a few degrees away; counted, the view that happened to
-    have the most of them would be chosen for them.
+    Same-class proposals whose 3D boxes touch are one object: a detector's mask split in two
+    halves would otherwise make a view count double, and the view be chosen for its split. An
+    object is corroborated when a proposal of another view (`others`), of any label, touches
+    one of its proposals: a false positive of one view is not seen again from a few degrees
+    away, and counted, the view that happened to have the most of them would win.
     """
-    group = list(range(len(proposals)))
-
-    def root(i: int) -> int:
-        while group[i] != i:
-            i = group[i]
-        return i
-
-    for i, a in enumerate(proposals):
-        for j in range(i):
-            if a.label == proposals[j].label and _touch(a, proposals[j]):
-                group[root(i)] = root(j)
-    if others is None:
-        return len({root(i) for i in range(len(proposals))})
-    seen = [any(_touch(p, o) for view in others for o in view) for p in proposals]
-    return len({root(i) for i in range(len(proposals)) if seen[i]})
+    if not proposals:
+        return 0, 0
+    same = np.array([[a.label == b.label and _touch(a, b) for b in proposals] for a in proposals])
+    _, group = connected_components(csr_matrix(same), directed=False)
+    seen = np.array([any(_touch(p, o) for view in others for o in view) for p in proposals])
+    return len(set(group[seen].tolist())), len(set(group.tolist()))
 
 
 def class_votes(

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from core.geometry import Proposal
-from core.sweep import class_votes, objects_shown
+from core.sweep import class_votes, view_score
 
 
 def proposal(label: str, x: float, width: float = 0.05, y: float = 0.0) -> Proposal:
@@ -15,15 +15,18 @@ def proposal(label: str, x: float, width: float = 0.05, y: float = 0.0) -> Propo
     return Proposal(label, 0.9, "object", center, extent, None, 100, "f", 0.0, 0.75, 0, scores)
 
 
+def objects(view: list[Proposal]) -> int:
+    return view_score(view, [])[1]
+
+
 def test_a_view_s_objects_count_a_mask_split_in_two_once() -> None:
     halves = [proposal("mug", 0.0), proposal("mug", 0.045)]  # boxes overlapping by 5 mm
-    assert objects_shown(halves) == 1
-    assert objects_shown([*halves, proposal("mug", 0.3)]) == 2  # another mug 0.3 m along
-    assert objects_shown([proposal("mug", 0.0), proposal("book", 0.045)]) == 2  # two classes
+    assert objects(halves) == 1
+    assert objects([*halves, proposal("mug", 0.3)]) == 2  # another mug 0.3 m along
+    assert objects([proposal("mug", 0.0), proposal("book", 0.045)]) == 2  # two classes
     # A chain of touching pieces is one object; nothing is none.
-    chain = [proposal("mug", 0.0), proposal("mug", 0.09), proposal("mug", 0.045)]
-    assert objects_shown(chain) == 1
-    assert objects_shown([]) == 0
+    assert objects([proposal("mug", 0.0), proposal("mug", 0.09), proposal("mug", 0.045)]) == 1
+    assert view_score([], [[proposal("mug", 0.0)]]) == (0, 0)
 
 
 def test_the_label_most_views_give_an_object_wins_and_its_geometry_stays() -> None:
@@ -50,10 +53,9 @@ def test_an_alternate_proposal_votes_for_the_nearest_primary_proposal_it_touches
     assert (first.label, second.label) == ("mug", "cup")
 
 
-def test_only_objects_another_view_corroborates_count_when_the_views_are_given() -> None:
+def test_only_objects_another_view_corroborates_count_first() -> None:
     view = [proposal("mug", 0.0), proposal("mug", 0.045), proposal("cup", 0.5)]  # halves, a cup
-    assert objects_shown(view) == 2
-    assert objects_shown(view, [[proposal("bowl", 0.09)]]) == 1  # a piece seen again: the mug
-    assert objects_shown(view, [[proposal("cup", 0.5)], [proposal("mug", 0.0)]]) == 2
-    assert objects_shown(view, [[proposal("cup", 1.5)], []]) == 0  # nothing seen again
-    assert objects_shown(view, []) == 0
+    assert view_score(view, [[proposal("bowl", 0.09)]]) == (1, 2)  # a piece seen again: the mug
+    assert view_score(view, [[proposal("cup", 0.5)], [proposal("mug", 0.0)]]) == (2, 2)
+    assert view_score(view, [[proposal("cup", 1.5)], []]) == (0, 2)  # nothing seen again
+    assert view_score(view, []) == (0, 2)
