@@ -11,11 +11,11 @@ Over the frames of a batch occupied wins over free.
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Sequence
 from typing import Any
 
+import numba
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import minimum_filter1d
@@ -72,56 +72,112 @@ def _median_depth(
     Axial noise puts a few points of every surface in front of it; each marks its cell occupied,
     and no free ray clears it (rays stop at the nearest point of their bearing), so over a run
     the obstacles' boundaries would grow by the noise's extremes (10 cm at 4 m, measured). The
-    median keeps edges where a plain mean would blur them.
-
-    The window's depths are kept as one plane per offset and sorted across the planes by a
-    sorting network (whole-array minima and maxima): the lower median of the usable depths,
-    with unusable ones sorted last, is then the plane its count of usable depths names.
+    median keeps edges where a plain mean would blur them. It is the lower median of the
+    window's usable depths (positive and finite), the window clamped at the image's edges.
     """
-    height, width = depth.shape
-    centre = depth[rows[:, None], cols[None, :]].astype(np.float64)
     if window <= 1:
-        return centre.ravel()
-    half = window // 2
-    planes: list[npt.NDArray[Any]] = []
-    usable_count = np.zeros((rows.size, cols.size), np.intp)
-    for row_offset in range(-half, half + 1):
-        band = depth[np.clip(rows + row_offset, 0, height - 1)]
-        for col_offset in range(-half, half + 1):
-            plane = band[:, np.clip(cols + col_offset, 0, width - 1)]
-            usable = (plane > 0) & (plane < np.inf)  # NaN compares false
-            usable_count += usable
-            planes.append(np.where(usable, plane, np.inf))
-    for low, high in _sorting_network(window * window):
-        planes[low], planes[high] = (
-            np.minimum(planes[low], planes[high]),
-            np.maximum(planes[low], planes[high]),
-        )
-    middle = np.maximum(usable_count - 1, 0) // 2  # the lower median of the usable
-    lower_half = np.stack(planes[: (window * window + 1) // 2])
-    median = np.take_along_axis(lower_half, middle[None], axis=0)[0].astype(np.float64)
-    has_depth = np.isfinite(centre) & (centre > 0)
-    result: FloatArray = np.where(has_depth, median, centre).ravel()
+        return depth[rows[:, None], cols[None, :]].astype(np.float64).ravel()
+    medians: FloatArray = _lower_usable_medians(depth, rows, cols, window // 2)
+    return medians
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _usable(value: float) -> bool:  # pragma: no cover - compiled
+    return (value > 0) & (value < np.inf)  # NaN compares false
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _ordered(a: float, b: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    return min(a, b), max(a, b)
+
+
+@numba.njit(cache=True, nogil=True)
+def _median_of_nine(
+    p0: float,
+    p1: float,
+    p2: float,
+    p3: float,
+    p4: float,
+    p5: float,
+    p6: float,
+    p7: float,
+    p8: float,
+) -> float:  # pragma: no cover - compiled
+    """The median of nine values by Paeth's 19 compare-exchanges (no branch to mispredict)."""
+    p1, p2 = _ordered(p1, p2)
+    p4, p5 = _ordered(p4, p5)
+    p7, p8 = _ordered(p7, p8)
+    p0, p1 = _ordered(p0, p1)
+    p3, p4 = _ordered(p3, p4)
+    p6, p7 = _ordered(p6, p7)
+    p1, p2 = _ordered(p1, p2)
+    p4, p5 = _ordered(p4, p5)
+    p7, p8 = _ordered(p7, p8)
+    p0, p3 = _ordered(p0, p3)
+    p5, p8 = _ordered(p5, p8)
+    p4, p7 = _ordered(p4, p7)
+    p3, p6 = _ordered(p3, p6)
+    p1, p4 = _ordered(p1, p4)
+    p2, p5 = _ordered(p2, p5)
+    p4, p7 = _ordered(p4, p7)
+    p4, p2 = _ordered(p4, p2)
+    p6, p4 = _ordered(p6, p4)
+    p4, p2 = _ordered(p4, p2)
+    return p4
+
+
+@numba.njit(cache=True, nogil=True)
+def _lower_usable_medians(
+    depth: npt.NDArray[Any], rows: IntArray, cols: IntArray, half: int
+) -> FloatArray:  # pragma: no cover - compiled
+    """`_median_depth` on the grid rows x cols (flat, row-major) for a window of 2 * half + 1.
+    A 3x3 window of nine usable depths, the common case, takes the median of nine; any other
+    is sorted by insertion as it is read (a few dozen values at most)."""
+    height, width = depth.shape
+    result = np.empty(rows.size * cols.size)
+    usable = np.empty((2 * half + 1) ** 2)
+    for i in range(rows.size):
+        top, row, bottom = max(rows[i] - 1, 0), rows[i], min(rows[i] + 1, height - 1)
+        for j in range(cols.size):
+            at = i * cols.size + j
+            centre = np.float64(depth[row, cols[j]])
+            if not _usable(centre):
+                result[at] = centre
+                continue
+            if half == 1:
+                left, col, right = max(cols[j] - 1, 0), cols[j], min(cols[j] + 1, width - 1)
+                p0, p1, p2 = depth[top, left], depth[top, col], depth[top, right]
+                p3, p5 = depth[row, left], depth[row, right]
+                p6, p7, p8 = depth[bottom, left], depth[bottom, col], depth[bottom, right]
+                if (
+                    _usable(p0)
+                    & _usable(p1)
+                    & _usable(p2)
+                    & _usable(p3)
+                    & _usable(p5)
+                    & _usable(p6)
+                    & _usable(p7)
+                    & _usable(p8)
+                ):
+                    result[at] = _median_of_nine(
+                        np.float64(p0), np.float64(p1), np.float64(p2), np.float64(p3),
+                        centre, np.float64(p5), np.float64(p6), np.float64(p7), np.float64(p8),
+                    )  # fmt: skip
+                    continue
+            count = 0
+            for near_row in range(rows[i] - half, rows[i] + half + 1):
+                clamped = min(max(near_row, 0), height - 1)
+                for near_col in range(cols[j] - half, cols[j] + half + 1):
+                    value = np.float64(depth[clamped, min(max(near_col, 0), width - 1)])
+                    if _usable(value):
+                        slot = count
+                        while slot > 0 and usable[slot - 1] > value:
+                            usable[slot] = usable[slot - 1]
+                            slot -= 1
+                        usable[slot] = value
+                        count += 1
+            result[at] = usable[(count - 1) // 2]
     return result
-
-
-@functools.cache
-def _sorting_network(inputs: int) -> tuple[tuple[int, int], ...]:
-    """Batcher's odd-even merge sort for `inputs` wires: compare-exchange pairs (low, high),
-    in order, after which the wires hold their values sorted."""
-    pairs = []
-    span = 1
-    while span < inputs:
-        step = span
-        while step >= 1:
-            for first in range(step % span, inputs - step, 2 * step):
-                for offset in range(min(step, inputs - first - step)):
-                    low = first + offset
-                    if low // (2 * span) == (low + step) // (2 * span):
-                        pairs.append((low, low + step))
-            step //= 2
-        span *= 2
-    return tuple(pairs)
 
 
 def _footprint(camera: FloatArray, params: OccupancyParams) -> tuple[FloatArray, FloatArray]:
@@ -149,19 +205,45 @@ class _Window:
 
     def cells(self, x: FloatArray, y: FloatArray) -> IntArray:
         """Sorted unique flat grid indices of the points' cells (those inside the grid)."""
-        res = self.geometry.resolution_m
-        col = np.floor(x / res).astype(np.int64) - self.base_col
-        row = np.floor(y / res).astype(np.int64) - self.base_row
-        keep = (col >= 0) & (col < self.size) & (row >= 0) & (row < self.size)
-        mark = np.zeros((self.size, self.size), dtype=bool)
-        mark[row[keep], col[keep]] = True
-        local_row, local_col = np.nonzero(mark)  # row-major: sorted flat indices
-        half, side = self.geometry.side // 2, self.geometry.side
-        grid_row = local_row.astype(np.int64) + self.base_row + half
-        grid_col = local_col.astype(np.int64) + self.base_col + half
-        inside = (grid_row >= 0) & (grid_row < side) & (grid_col >= 0) & (grid_col < side)
-        flat: IntArray = grid_row[inside] * side + grid_col[inside]
+        flat: IntArray = _marked_cells(
+            x,
+            y,
+            self.geometry.resolution_m,
+            (self.base_row, self.base_col, self.size),
+            (self.geometry.side // 2, self.geometry.side),
+        )
         return flat
+
+
+@numba.njit(cache=True, nogil=True)
+def _marked_cells(
+    x: FloatArray,
+    y: FloatArray,
+    resolution: float,
+    window: tuple[int, int, int],
+    grid: tuple[int, int],
+) -> IntArray:  # pragma: no cover - compiled
+    """The points' cells marked in the window (base row, base column, size), then read back in
+    row-major order (sorted and unique) as flat indices of the grid (half, side)."""
+    base_row, base_col, size = window
+    half, side = grid
+    mark = np.zeros((size, size), np.bool_)
+    for index in range(x.size):
+        at_col = np.int64(np.floor(x[index] / resolution)) - base_col
+        at_row = np.int64(np.floor(y[index] / resolution)) - base_row
+        if at_col >= 0 and at_col < size and at_row >= 0 and at_row < size:
+            mark[at_row, at_col] = True
+    flat = np.empty(int(mark.sum()), np.int64)
+    written = 0
+    for row in range(size):
+        grid_row = row + base_row + half
+        for col in range(size):
+            if mark[row, col]:
+                grid_col = col + base_col + half
+                if grid_row >= 0 and grid_row < side and grid_col >= 0 and grid_col < side:
+                    flat[written] = grid_row * side + grid_col
+                    written += 1
+    return flat[:written]
 
 
 def _rays(

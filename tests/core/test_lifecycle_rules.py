@@ -315,18 +315,6 @@ PERTURBED_RUN = (
 )
 
 
-def test_square_erosion_matches_scipy() -> None:
-    from scipy import ndimage
-
-    from core.geometry import erode_square
-
-    rng = np.random.default_rng(1)
-    for _ in range(20):
-        mask = ndimage.binary_dilation(rng.random((30, 40)) > 0.93, iterations=3)
-        expected = ndimage.binary_erosion(mask, structure=np.ones((5, 5), bool), border_value=0)
-        assert np.array_equal(erode_square(mask, 2), expected)
-
-
 def at_time(batch: Batch, seconds: float) -> Batch:
     """The batch with its frame stamped at `seconds`."""
     from dataclasses import replace

@@ -1,0 +1,186 @@
+"""One mask's valid, interior and inlier depth (section 3.2), compiled by numba.
+
+`ground_detection` in `core.geometry` states the rule in numpy: the mask's pixels with depth in
+range, the interior left by a square erosion of the mask cut to the valid pixels' box, the
+median and MAD of the interior's depth (or of all valid depth when the interior is small), and
+the camera-frame points of the pixels within the band. Those are some thirty array operations
+on a mask of a few thousand pixels, where each operation's own cost outweighs its work. This
+kernel walks the mask's run lengths once and computes the same values, bit for bit: integer
+steps and order statistics are exact, and each floating-point expression is the numpy one's,
+in its order, with depth compared in its own precision as numpy compares an array with a
+Python float. The tests compare it with the numpy rule on random masks and depth.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+IntArray = npt.NDArray[np.int64]
+
+
+@numba.njit(cache=True, nogil=True)
+def _median(values: FloatArray) -> float:  # pragma: no cover - compiled
+    """`np.median` of a non-empty array without NaN: the middle order statistic, or the mean of
+    the two middle ones (the lower is the largest value left of the upper after selection)."""
+    count = values.size
+    middle = count // 2
+    selected = np.partition(values, middle)
+    if count % 2:
+        return float(selected[middle])
+    lower = selected[0]
+    for index in range(1, middle):
+        lower = max(lower, selected[index])
+    return float((lower + selected[middle]) / 2)
+
+
+@numba.njit(cache=True, nogil=True)
+def _mask_box(runs: IntArray, height: int) -> tuple[int, int, int, int]:  # pragma: no cover
+    """(top, bottom, left, right), inclusive, of the pixels a COCO run-length mask sets
+    (column-major runs, zeros first); (0, -1, 0, -1) for an empty mask."""
+    top, bottom, left, right = height, -1, -1, -1
+    position = 0
+    for index in range(runs.size):
+        length = runs[index]
+        if index % 2 == 1 and length > 0:
+            first, last = position, position + length - 1
+            if left < 0:
+                left = first // height
+            right = last // height
+            if last // height > first // height:  # the run wraps over a column's end
+                top, bottom = 0, height - 1
+            else:
+                top = min(top, first % height)
+                bottom = max(bottom, last % height)
+        position += length
+    if left < 0:
+        return 0, -1, 0, -1
+    return top, bottom, left, right
+
+
+@numba.njit(cache=True, nogil=True)
+def _draw(
+    runs: IntArray, height: int, top: int, left: int, rows: int, cols: int
+) -> npt.NDArray[np.bool_]:  # pragma: no cover
+    """The mask drawn on its own box (rows x cols from (top, left))."""
+    drawn = np.zeros((rows, cols), np.bool_)
+    position = 0
+    for index in range(runs.size):
+        length = runs[index]
+        if index % 2 == 1:
+            for pixel in range(position, position + length):
+                drawn[pixel % height - top, pixel // height - left] = True
+        position += length
+    return drawn
+
+
+@numba.njit(cache=True, nogil=True)
+def _eroded(crop: npt.NDArray[np.bool_], radius: int) -> npt.NDArray[np.bool_]:  # pragma: no cover
+    """Binary erosion by a (2r+1)^2 square, outside the array counting as background
+    (`core.geometry.erode_square`)."""
+    rows, cols = crop.shape
+    across = np.zeros((rows, cols), np.bool_)
+    for row in range(rows):
+        run = 0  # set pixels ending here
+        for col in range(cols):
+            run = run + 1 if crop[row, col] else 0
+            centre = col - radius
+            if centre >= radius and run >= 2 * radius + 1:
+                across[row, centre] = True
+    eroded = np.zeros((rows, cols), np.bool_)
+    for col in range(radius, cols - radius):
+        run = 0
+        for row in range(rows):
+            run = run + 1 if across[row, col] else 0
+            centre = row - radius
+            if centre >= radius and run >= 2 * radius + 1:
+                eroded[centre, col] = True
+    return eroded
+
+
+@numba.njit(cache=True, nogil=True)
+def mask_points(
+    runs: IntArray,
+    height: int,
+    width: int,
+    depth: npt.NDArray[np.floating],
+    near: np.floating,
+    far: np.floating,
+    camera: tuple[float, float, float, float],
+    rules: tuple[int, int, int, int, float, float],
+) -> tuple[FloatArray, int]:  # pragma: no cover - compiled
+    """Camera-frame points (n, 3) of a mask's inlier depth and the inlier pixel count
+    (estimated for a sampled mask), or an empty array and -1 when the mask has too little
+    valid depth or too few inliers. `depth` is the frame's, flat; `near` and `far` are the range
+    in its dtype; `camera` is (fx, fy, cx, cy); `rules` is (min valid pixels, max samples,
+    erosion px, min interior pixels, inlier MAD k, inlier min band)."""
+    min_valid, max_samples, erosion, min_interior, mad_k, min_band = rules
+    fx, fy, cx, cy = camera
+    none = np.zeros((0, 3))
+    top, bottom, left, right = _mask_box(runs, height)
+    rows, cols = bottom - top + 1, right - left + 1
+    if rows <= 0:
+        return none, -1
+    drawn = _draw(runs, height, top, left, rows, cols)
+    # The mask's pixels with depth in range, in C order, with their box.
+    flat = np.empty(rows * cols, np.int64)
+    valid_depth = np.empty(rows * cols)
+    valid = 0
+    r0, r1, c0, c1 = rows, -1, cols, -1
+    for row in range(rows):
+        for col in range(cols):
+            if drawn[row, col]:
+                index = (top + row) * width + left + col
+                value = depth[index]
+                if value >= near and value <= far:
+                    flat[valid] = index
+                    valid_depth[valid] = np.float64(value)
+                    valid += 1
+                    r0, r1 = min(r0, row), max(r1, row)
+                    c0, c1 = min(c0, col), max(c1, col)
+    if valid < min_valid:
+        return none, -1
+    stride = -(-valid // max_samples)
+    sampled = (valid + stride - 1) // stride
+    sample_index = flat[:valid:stride].copy()
+    sample_depth = valid_depth[:valid:stride].copy()
+    # The interior: the mask cut to the valid pixels' box, eroded; its pixels with depth in
+    # range, sampled on the same stride among all interior pixels.
+    interior = np.empty(sampled if erosion <= 0 else (r1 - r0 + 1) * (c1 - c0 + 1))
+    inside = 0
+    if erosion <= 0:
+        interior[:sampled] = sample_depth
+        inside = sampled
+    else:
+        eroded = _eroded(drawn[r0 : r1 + 1, c0 : c1 + 1], erosion)
+        counted = 0
+        for row in range(r1 - r0 + 1):
+            for col in range(c1 - c0 + 1):
+                if eroded[row, col]:
+                    if counted % stride == 0:
+                        value = depth[(top + r0 + row) * width + left + c0 + col]
+                        if value >= near and value <= far:
+                            interior[inside] = np.float64(value)
+                            inside += 1
+                    counted += 1
+    reference = interior[:inside] if inside >= min_interior else sample_depth
+    median = _median(reference.copy())
+    mad = 1.4826 * _median(np.abs(reference - median))
+    band = max(min_band, mad_k * mad)
+    keep = np.abs(sample_depth - median) <= band
+    count = int(keep.sum())
+    if count * stride < min_valid:
+        return none, -1
+    points = np.empty((count, 3))
+    written = 0
+    for sample in range(sampled):
+        if keep[sample]:
+            v, u = divmod(sample_index[sample], width)
+            value = sample_depth[sample]
+            points[written, 0] = (u - cx) / fx * value
+            points[written, 1] = (v - cy) / fy * value
+            points[written, 2] = value
+            written += 1
+    return points, count * stride
