@@ -11,7 +11,7 @@ shows (an over-segmented mask) is set aside rather than taken for a new object.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,13 +66,13 @@ def associate(
     if not proposals or len(pool.track_ids) == 0:
         return matches
     pairs: list[tuple[float, str, int]] = []
-    for j, proposal in enumerate(proposals):
-        distances = np.linalg.norm(pool.centers - proposal.center, axis=1)
+    for j, distances in enumerate(_distances(proposals, pool.centers)):
+        proposal = proposals[j]
         near = distances < params.max_center_distance_m
         if pool.eligible is not None:
             near &= pool.eligible
         observed = class_distribution(proposal.label, proposal.class_scores)
-        for i in (int(k) for k in np.flatnonzero(near)):
+        for i in np.flatnonzero(near).tolist():
             if pool.kinds[i] != proposal.kind:
                 continue
             if not classes_agree(pool.class_belief_of(i), proposal.label, observed, params):
@@ -93,6 +93,15 @@ def associate(
         pieces = set() if pieces_of is None else pieces_of(matches)  # only when it can matter
         matches.update(_fallback(proposals, pool, matches, used_tracks, pieces, params))
     return matches
+
+
+def _distances(proposals: Sequence[Proposal], centers: FloatArray) -> Iterator[FloatArray]:
+    """Each proposal's distance to every track center, computed for many proposals at once
+    (each row's norm is the one `norm(axis=1)` takes), a few megabytes at a time."""
+    per_chunk = max(1, (1 << 18) // max(1, centers.shape[0]))
+    for start in range(0, len(proposals), per_chunk):
+        chunk = np.array([p.center for p in proposals[start : start + per_chunk]])
+        yield from np.linalg.norm(centers[None, :, :] - chunk[:, None, :], axis=2)
 
 
 def _fallback(

@@ -67,6 +67,8 @@ def classes_agree(
     compatibility reaches `min_class_compatibility`; the paper's (`soft_class_agreement`
     False), the detection's label is the belief's most likely class."""
     if params.soft_class_agreement:
+        if params.min_class_compatibility > 0 and belief.keys().isdisjoint(observed):
+            return False  # no class in common: the compatibility is 0 (each term p * 0)
         return class_compatibility(belief, observed) >= params.min_class_compatibility
     return most_supported(belief) == label
 

@@ -50,7 +50,8 @@ def frame_cells(frame: Frame, params: OccupancyParams) -> tuple[IntArray, IntArr
     reach = np.hypot(dx, dy)
     # Within the sensor's range of the camera (odd intrinsics can spread points wider).
     near = np.isfinite(reach) & (reach <= params.max_range_m) & np.isfinite(points[:, 2])
-    points, dx, dy, reach = points[near], dx[near], dy[near], reach[near]
+    if not near.all():  # (almost always all are: then nothing to copy)
+        points, dx, dy, reach = points[near], dx[near], dy[near], reach[near]
     obstacle = (points[:, 2] >= params.band_min_z_m) & (points[:, 2] <= params.band_max_z_m)
     floor = points[:, 2] < params.band_min_z_m
     occupied = window.cells(points[obstacle, 0], points[obstacle, 1])
@@ -261,7 +262,9 @@ def _rays(
     within `spread` radians of it."""
     bin_width = params.resolution_m / (params.ray_bins_per_cell_at_max_range * params.max_range_m)
     count = math.ceil(2 * math.pi / bin_width)
-    bins = np.minimum((np.arctan2(dy, dx) + math.pi) // bin_width, count - 1).astype(np.intp)
+    bins = np.minimum(floor_divide(np.arctan2(dy, dx) + math.pi, bin_width), count - 1).astype(
+        np.intp
+    )
     nearest_obstacle = np.full(count, np.inf)
     np.minimum.at(nearest_obstacle, bins[obstacle], reach[obstacle])
     farthest_floor = np.zeros(count)
@@ -280,6 +283,17 @@ def _rays(
     x = camera[0] + np.cos(angle)[:, None] * steps[None, :]
     y = camera[1] + np.sin(angle)[:, None] * steps[None, :]
     return x[along], y[along]
+
+
+def floor_divide(values: FloatArray, divisor: float) -> FloatArray:
+    """`values // divisor` (numpy's floor division, exactly), at the cost of a true division:
+    floor(values / divisor) differs from it only where the rounded quotient lies within a
+    rounding error of an integer, and only there is the floor division itself computed."""
+    quotient = values / divisor
+    result: FloatArray = np.floor(quotient)
+    doubtful = np.flatnonzero(np.abs(quotient - np.rint(quotient)) <= 1e-6 * np.abs(quotient))
+    result[doubtful] = values[doubtful] // divisor
+    return result
 
 
 def occupancy_evidence(

@@ -101,8 +101,9 @@ def batch_visibility(
         for index, sighting in columns.shown(frame.frame_id):
             track_id = arrays.track_ids[int(rows[index])]
             held = best.get(track_id)
-            rank = _rank(sighting, params.visibility, rules.visibility_gate)
-            if held is None or rank > _rank(held, params.visibility, rules.visibility_gate):
+            if held is None or _rank(sighting, params.visibility, rules.visibility_gate) > _rank(
+                held, params.visibility, rules.visibility_gate
+            ):
                 best[track_id] = sighting
         shown.append(frozenset(t for t, s in best.items() if observable(s, params.visibility)))
     visible = frozenset(
@@ -155,8 +156,13 @@ class SampleColumns(NamedTuple):
 
     def shown(self, frame_id: str) -> Iterator[tuple[int, Sighting]]:
         """(index, sighting) of the boxes with a sample passed (the only ones a batch keeps)."""
+        passed, fraction = self.passed.tolist(), self.fraction.tolist()
+        in_image, empty = self.in_image_share.tolist(), self.empty.tolist()
         for index in np.flatnonzero(self.passed).tolist():
-            yield index, self.sighting(index, frame_id)
+            yield (
+                index,
+                Sighting(passed[index], fraction[index], in_image[index], empty[index], frame_id),
+            )
 
 
 def sample_columns(

@@ -1,4 +1,5 @@
-"""The occupancy evidence's depth median (core/occupancy_evidence.py): exactly the lower median
+"""The occupancy evidence's depth median and its bearing bins' floor division
+(core/occupancy_evidence.py). The median is exactly the lower median
 of the usable depths around each pixel, by the median of nine where all nine are usable and by
 insertion elsewhere."""
 
@@ -6,8 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from core.occupancy_evidence import _median_depth
+from core.occupancy_evidence import _median_depth, floor_divide
 
 
 def reference_median(
@@ -60,3 +63,23 @@ def test_windows_of_nine_usable_depths_give_their_median(seed: int) -> None:
     rows, cols = np.arange(31), np.arange(41)
     got = _median_depth(depth, rows, cols, 3)
     assert np.array_equal(got, reference_median(depth, rows, cols, 3), equal_nan=True)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    values=st.lists(st.floats(-10, 10, allow_nan=False), min_size=1, max_size=50),
+    divisor=st.floats(1e-4, 3.0),
+    multiples=st.lists(st.integers(-2000, 2000), max_size=20),
+)
+def test_the_bearing_bins_floor_division_is_numpy_s(
+    values: list[float], divisor: float, multiples: list[int]
+) -> None:
+    # Exact multiples of the divisor and their neighbours are where a rounded quotient meets an
+    # integer (1.0 // 0.1 is 9.0, while floor(1.0 / 0.1) is 10.0).
+    near = [k * divisor for k in multiples]
+    near += [float(np.nextafter(v, np.inf)) for v in near] + [
+        float(np.nextafter(v, -np.inf)) for v in near
+    ]
+    array = np.array(values + near + [1.0, 0.3, 0.7], dtype=np.float64)
+    for d in (divisor, 0.1):
+        assert np.array_equal(floor_divide(array, d), array // d)
