@@ -66,13 +66,14 @@ def associate(
     if not proposals or len(pool.track_ids) == 0:
         return matches
     pairs: list[tuple[float, str, int]] = []
-    for j, distances in enumerate(_distances(proposals, pool.centers)):
+    reach = params.max_center_distance_m
+    for j, (rows, distances) in enumerate(_distances(proposals, pool.centers, reach)):
         proposal = proposals[j]
-        near = distances < params.max_center_distance_m
+        near = distances < reach
         if pool.eligible is not None:
-            near &= pool.eligible
+            near &= pool.eligible[rows]
         observed = class_distribution(proposal.label, proposal.class_scores)
-        for i in np.flatnonzero(near).tolist():
+        for i, distance in zip(rows[near].tolist(), distances[near].tolist(), strict=True):
             if pool.kinds[i] != proposal.kind:
                 continue
             if not classes_agree(pool.class_belief_of(i), proposal.label, observed, params):
@@ -81,7 +82,7 @@ def associate(
                 pool.embedding_of(i), proposal.embedding, params.min_appearance_cosine
             ):
                 continue
-            pairs.append((float(distances[i]), pool.track_ids[i], j))
+            pairs.append((distance, pool.track_ids[i], j))
     used_tracks: set[str] = set()
     for _distance, track_id, j in sorted(pairs):  # greedy by distance; ties by id, then index
         if j in matches or track_id in used_tracks:
@@ -95,13 +96,26 @@ def associate(
     return matches
 
 
-def _distances(proposals: Sequence[Proposal], centers: FloatArray) -> Iterator[FloatArray]:
-    """Each proposal's distance to every track center, computed for many proposals at once
-    (each row's norm is the one `norm(axis=1)` takes), a few megabytes at a time."""
-    per_chunk = max(1, (1 << 18) // max(1, centers.shape[0]))
+def _distances(
+    proposals: Sequence[Proposal], centers: FloatArray, reach: float
+) -> Iterator[tuple[npt.NDArray[np.intp], FloatArray]]:
+    """Per proposal: the rows of the tracks within `reach` of all the proposals' box on every
+    axis (no other track is within `reach` of any proposal), and each one's distance to the
+    proposal, the value `np.linalg.norm(..., axis=1)` gives ((dx^2 + dy^2) + dz^2, rooted),
+    computed by columns for many proposals at once, a few megabytes at a time."""
+    points = np.array([p.center for p in proposals], dtype=np.float64)
+    low, high = points.min(axis=0) - reach, points.max(axis=0) + reach
+    rows = np.flatnonzero(((centers >= low) & (centers <= high)).all(axis=1))
+    columns = np.ascontiguousarray(centers[rows].T)
+    per_chunk = max(1, (1 << 18) // max(1, rows.size))
     for start in range(0, len(proposals), per_chunk):
-        chunk = np.array([p.center for p in proposals[start : start + per_chunk]])
-        yield from np.linalg.norm(centers[None, :, :] - chunk[:, None, :], axis=2)
+        chunk = points[start : start + per_chunk]
+        total = np.zeros((chunk.shape[0], rows.size))
+        for axis in range(3):
+            offset = columns[axis][None, :] - chunk[:, axis, None]
+            total += offset * offset
+        for distances in np.sqrt(total):
+            yield rows, distances
 
 
 def _fallback(

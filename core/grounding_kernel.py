@@ -22,18 +22,47 @@ IntArray = npt.NDArray[np.int64]
 
 
 @numba.njit(cache=True, nogil=True)
+def _select(values: FloatArray, k: int) -> None:  # pragma: no cover - compiled
+    """Rearrange `values` in place so that values[k] is its k-th smallest, none left of it
+    larger and none right of it smaller (Hoare's selection with a median-of-three pivot)."""
+    lo, hi = 0, values.size
+    while hi - lo > 2:
+        mid = (lo + hi - 1) // 2
+        a, b, c = values[lo], values[mid], values[hi - 1]
+        pivot = max(min(a, b), min(max(a, b), c))
+        i, j = lo, hi - 1
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                values[i], values[j] = values[j], values[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j + 1
+        elif k >= i:
+            lo = i
+        else:
+            return
+    if hi - lo == 2 and values[lo] > values[lo + 1]:
+        values[lo], values[lo + 1] = values[lo + 1], values[lo]
+
+
+@numba.njit(cache=True, nogil=True)
 def _median(values: FloatArray) -> float:  # pragma: no cover - compiled
-    """`np.median` of a non-empty array without NaN: the middle order statistic, or the mean of
-    the two middle ones (the lower is the largest value left of the upper after selection)."""
+    """`np.median` of a non-empty array without NaN, rearranging it: the middle order statistic,
+    or the mean of the two middle ones (the lower is the largest value left of the upper)."""
     count = values.size
     middle = count // 2
-    selected = np.partition(values, middle)
+    _select(values, middle)
     if count % 2:
-        return float(selected[middle])
-    lower = selected[0]
+        return float(values[middle])
+    lower = values[0]
     for index in range(1, middle):
-        lower = max(lower, selected[index])
-    return float((lower + selected[middle]) / 2)
+        lower = max(lower, values[index])
+    return float((lower + values[middle]) / 2)
 
 
 @numba.njit(cache=True, nogil=True)

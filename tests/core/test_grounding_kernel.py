@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from core.geometry import camera_to_world, column_quantiles, ground_detection
-from core.grounding_kernel import _eroded
+from core.grounding_kernel import _eroded, _median
 from core.masks import Mask
 from core.observation import Detection, Frame, Intrinsics
 from core.params import ProposalParams
@@ -197,3 +197,13 @@ def test_depth_exactly_on_the_band_s_edge_is_an_inlier() -> None:
         FAR,
     )
     assert proposal is not None and proposal.valid_pixels == 16 * 16
+
+
+def test_the_kernel_s_median_is_numpy_s() -> None:
+    rng = np.random.default_rng(5)
+    for size in [*range(1, 12), 100, 101, 2000]:
+        for rounding in (None, 1, 0):
+            values = rng.normal(2.0, 1.0, size)
+            if rounding is not None:
+                values = np.round(values, rounding)  # ties, and many equal values
+            assert _median(values.copy()) == float(np.median(values))
