@@ -54,7 +54,7 @@ def frame_cells(frame: Frame, params: OccupancyParams) -> tuple[IntArray, IntArr
         points, dx, dy, reach = points[near], dx[near], dy[near], reach[near]
     obstacle = (points[:, 2] >= params.band_min_z_m) & (points[:, 2] <= params.band_max_z_m)
     floor = points[:, 2] < params.band_min_z_m
-    occupied = window.cells(points[obstacle, 0], points[obstacle, 1])
+    occupied = window.cells(points[:, 0], points[:, 1], obstacle)
     # Neighbouring sampled pixels are stride / f radians apart; a bin narrower than that may
     # hold a floor point behind an obstacle whose points fell in the bins beside it.
     spread = params.pixel_stride / min(frame.intrinsics.fx, frame.intrinsics.fy)
@@ -204,11 +204,15 @@ class _Window:
         self.base_col = math.floor(camera[0] / res) - self.radius
         self.base_row = math.floor(camera[1] / res) - self.radius
 
-    def cells(self, x: FloatArray, y: FloatArray) -> IntArray:
-        """Sorted unique flat grid indices of the points' cells (those inside the grid)."""
+    def cells(
+        self, x: FloatArray, y: FloatArray, chosen: npt.NDArray[np.bool_] | None = None
+    ) -> IntArray:
+        """Sorted unique flat grid indices of the cells of the points (the `chosen` ones) that
+        are inside the grid."""
         flat: IntArray = _marked_cells(
             x,
             y,
+            np.ones(x.size, np.bool_) if chosen is None else chosen,
             self.geometry.resolution_m,
             (self.base_row, self.base_col, self.size),
             (self.geometry.side // 2, self.geometry.side),
@@ -220,16 +224,19 @@ class _Window:
 def _marked_cells(
     x: FloatArray,
     y: FloatArray,
+    chosen: npt.NDArray[np.bool_],
     resolution: float,
     window: tuple[int, int, int],
     grid: tuple[int, int],
 ) -> IntArray:  # pragma: no cover - compiled
-    """The points' cells marked in the window (base row, base column, size), then read back in
+    """The chosen points' cells marked in the window (base row, base column, size), then read back in
     row-major order (sorted and unique) as flat indices of the grid (half, side)."""
     base_row, base_col, size = window
     half, side = grid
     mark = np.zeros((size, size), np.bool_)
     for index in range(x.size):
+        if not chosen[index]:
+            continue
         at_col = np.int64(np.floor(x[index] / resolution)) - base_col
         at_row = np.int64(np.floor(y[index] / resolution)) - base_row
         if at_col >= 0 and at_col < size and at_row >= 0 and at_row < size:

@@ -18,6 +18,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
+import numba
 import numpy as np
 import numpy.typing as npt
 
@@ -280,27 +281,51 @@ def _window_depth(
     """Median of the valid depths in the window around each pixel; 0 where none is valid.
 
     A window reaching past the image's edge repeats the edge's pixels (the coordinates are
-    clipped); windows wholly inside are read by flat offsets, with no clipping to pay.
+    clipped). The windows are read in one compiled pass, invalid depths as +inf so that they
+    sort last, and sorted by numpy in the image's own precision (compared as float64, as the
+    limits are: the values and their order are the same).
     """
-    half = params.depth_window_px // 2
-    height, width = depth.shape
-    offsets = np.arange(-half, half + 1)
-    flat = (v * width + u)[:, None] + (offsets[:, None] * width + offsets[None, :]).ravel()
-    edge = np.flatnonzero((u < half) | (u >= width - half) | (v < half) | (v >= height - half))
-    if edge.size:
-        rows = np.clip(v[edge, None] + offsets[None, :], 0, height - 1) * width
-        cols = np.clip(u[edge, None] + offsets[None, :], 0, width - 1)
-        flat[edge] = (rows[:, :, None] + cols[:, None, :]).reshape(edge.size, -1)
-    window = depth.reshape(-1)[flat]
-    # Compared as float64 (the limits are), sorted in the image's own precision: the values and
-    # their order are the same.
-    low, high = np.float64(params.min_range_m), np.float64(params.max_range_m)
-    valid = (window >= low) & (window <= high)
-    # Median of the valid values per row: invalid ones sort to the end as +inf.
-    window = np.sort(np.where(valid, window, np.inf).astype(window.dtype, copy=False), axis=1)
-    counts = np.count_nonzero(valid, axis=1)
+    window, counts = _windows(
+        depth,
+        u,
+        v,
+        params.depth_window_px // 2,
+        float(params.min_range_m),
+        float(params.max_range_m),
+    )
+    window.sort(axis=1)
     rows_index = np.arange(len(u))
     upper = window[rows_index, counts // 2].astype(np.float64)
     lower = window[rows_index, np.maximum(counts - 1, 0) // 2].astype(np.float64)
     measured: FloatArray = np.where(counts > 0, 0.5 * (upper + lower), 0.0)
     return measured
+
+
+@numba.njit(cache=True, nogil=True)
+def _windows(
+    depth: npt.NDArray[np.float32],
+    u: npt.NDArray[np.intp],
+    v: npt.NDArray[np.intp],
+    half: int,
+    low: float,
+    high: float,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.intp]]:  # pragma: no cover - compiled
+    """Each pixel's window of depths (row-major, clamped at the edges), the ones outside
+    [low, high] as +inf, and how many are inside."""
+    height, width = depth.shape
+    side = 2 * half + 1
+    window = np.empty((u.size, side * side), depth.dtype)
+    counts = np.zeros(u.size, np.intp)
+    for index in range(u.size):
+        slot = 0
+        for row in range(v[index] - half, v[index] + half + 1):
+            clamped = min(max(row, 0), height - 1)
+            for col in range(u[index] - half, u[index] + half + 1):
+                value = depth[clamped, min(max(col, 0), width - 1)]
+                if np.float64(value) >= low and np.float64(value) <= high:
+                    window[index, slot] = value
+                    counts[index] += 1
+                else:
+                    window[index, slot] = np.inf
+                slot += 1
+    return window, counts
