@@ -258,17 +258,27 @@ def _center_empty(
 
 def _bbox_area(owner: npt.NDArray[np.intp], u: FloatArray, v: FloatArray, count: int) -> FloatArray:
     """Per box, the area in pixels of the bounding box of its projected samples (0 when none)."""
-    area = np.zeros(count)
-    if owner.size == 0:
-        return area
+    area: FloatArray = _owner_box_areas(owner, u, v, count)
+    return area
+
+
+@numba.njit(cache=True, nogil=True)
+def _owner_box_areas(
+    owner: npt.NDArray[np.intp], u: FloatArray, v: FloatArray, count: int
+) -> FloatArray:  # pragma: no cover - compiled
+    """`_bbox_area` in one pass: each owner's extreme u and v, then (du + 1) * (dv + 1)."""
     low_u, high_u = np.full(count, np.inf), np.full(count, -np.inf)
     low_v, high_v = np.full(count, np.inf), np.full(count, -np.inf)
-    np.minimum.at(low_u, owner, u)
-    np.maximum.at(high_u, owner, u)
-    np.minimum.at(low_v, owner, v)
-    np.maximum.at(high_v, owner, v)
-    seen = np.isfinite(low_u)
-    area[seen] = (high_u[seen] - low_u[seen] + 1) * (high_v[seen] - low_v[seen] + 1)
+    for index in range(owner.size):
+        box = owner[index]
+        low_u[box] = np.minimum(low_u[box], u[index])  # NaN propagates, as in minimum.at
+        high_u[box] = np.maximum(high_u[box], u[index])
+        low_v[box] = np.minimum(low_v[box], v[index])
+        high_v[box] = np.maximum(high_v[box], v[index])
+    area = np.zeros(count)
+    for box in range(count):
+        if np.isfinite(low_u[box]):
+            area[box] = (high_u[box] - low_u[box] + 1) * (high_v[box] - low_v[box] + 1)
     return area
 
 

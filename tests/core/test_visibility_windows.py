@@ -41,3 +41,20 @@ def test_the_window_depth_is_the_median_of_the_valid_depths(dtype: type, window:
     v = np.concatenate((rng.integers(0, 30, 300), [0, 0, 29, 29, 1]))
     got = _window_depth(depth, u.astype(np.intp), v.astype(np.intp), params)
     assert np.array_equal(got, reference(depth, u, v, params))
+
+
+def test_each_box_s_projected_area_is_its_samples_bounding_box() -> None:
+    from core.visibility import _bbox_area
+
+    rng = np.random.default_rng(3)
+    owner = rng.integers(0, 40, 500).astype(np.intp)
+    u, v = rng.uniform(-50, 700, 500), rng.uniform(-50, 500, 500)
+    u[7] = np.nan  # its box's extremes are NaN: not seen, area 0 (as numpy's minimum.at gave)
+    got = _bbox_area(owner, u, v, 45)  # boxes 40-44 have no samples
+    for box in range(45):
+        mine = owner == box
+        if not mine.any() or np.isnan(u[mine]).any():
+            assert got[box] == 0.0
+            continue
+        expected = (np.max(u[mine]) - np.min(u[mine]) + 1) * (np.max(v[mine]) - np.min(v[mine]) + 1)
+        assert np.array_equal(got[box], expected, equal_nan=True)
