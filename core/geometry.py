@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from core.grounding_kernel import mask_points
+from core.grounding_kernel import mask_points, percentile_box
 from core.observation import Detection, DetectionKind, Frame, Intrinsics
 from core.params import ProposalParams
 
@@ -55,20 +54,6 @@ def world_to_camera(points: FloatArray, pose: FloatArray) -> FloatArray:
     return (points - pose[:3, 3]) @ rotation
 
 
-def column_quantiles(points: FloatArray, fractions: tuple[float, ...]) -> FloatArray:
-    """Linear-interpolated quantiles (numpy's default method) of each column of (n, d) points,
-    one row per fraction: the order statistics they read are selected, not the columns sorted."""
-    last = points.shape[0] - 1
-    positions = [fraction * last for fraction in fractions]
-    low = [math.floor(position) for position in positions]
-    high = [min(index + 1, last) for index in low]
-    rows = np.ascontiguousarray(points.T)  # a selection along contiguous memory is faster
-    selected = np.partition(rows, sorted({*low, *high}), axis=1)
-    weight = np.array([position - index for position, index in zip(positions, low, strict=True)])
-    result: FloatArray = (selected[:, low] * (1.0 - weight) + selected[:, high] * weight).T
-    return result
-
-
 def ground_detection(
     detection: Detection,
     frame: Frame,
@@ -111,9 +96,9 @@ def ground_detection(
     if inlier_pixels < 0:
         return None
     points = camera_to_world(camera_points, frame.pose)
-    # One selection per column gives the robust median center and the percentile box.
+    # Selection per column gives the robust median center and the percentile box.
     low_fraction, high_fraction = (p / 100.0 for p in params.extent_percentiles)
-    low, median, high = column_quantiles(points, (low_fraction, 0.5, high_fraction))
+    low, median, high = percentile_box(points, low_fraction, high_fraction)
     extent = np.maximum(high - low, params.min_extent_m)
     embedding = None
     if detection.embedding is not None:

@@ -51,6 +51,60 @@ def _select(values: FloatArray, k: int) -> None:  # pragma: no cover - compiled
 
 
 @numba.njit(cache=True, nogil=True)
+def _select_in(values: FloatArray, k: int, lo: int, hi: int) -> None:  # pragma: no cover
+    """`_select` within values[lo:hi] (k in it): the rest of the array is left as it is."""
+    _select(values[lo:hi], k - lo)
+
+
+@numba.njit(cache=True, nogil=True)
+def _least(values: FloatArray, lo: int, hi: int) -> float:  # pragma: no cover - compiled
+    """The least of values[lo:hi] (not empty)."""
+    least = values[lo]
+    for index in range(lo + 1, hi):
+        if values[index] < least:
+            least = values[index]
+    return float(least)
+
+
+@numba.njit(cache=True, nogil=True)
+def percentile_box(points: FloatArray, low: float, high: float) -> FloatArray:  # pragma: no cover
+    """Rows: each column's `low`, median and `high` quantiles (fractions, low < 0.5 < high),
+    linearly interpolated as numpy's default method is (between the order statistics a and b
+    around the position, a (1 - w) + b w; np.quantile rounds its own formula differently). The
+    median's order statistic is selected first, the low one left of it and the high one right
+    of it; the statistic after each is the least value between it and the next one selected."""
+    count = points.shape[0]
+    last = count - 1
+    result = np.empty((3, points.shape[1]))
+    column = np.empty(count)
+    fractions = (low, 0.5, high)
+    for axis in range(points.shape[1]):
+        for row in range(count):
+            column[row] = points[row, axis]
+        middle = int(np.floor(0.5 * last))
+        below, above = int(np.floor(low * last)), int(np.floor(high * last))
+        _select(column, middle)
+        if below < middle:
+            _select_in(column, below, 0, middle)
+        if above > middle:
+            _select_in(column, above, middle + 1, count)
+        for index in range(3):
+            position = fractions[index] * last
+            k = int(np.floor(position))
+            weight = position - k
+            value = column[k]
+            # The next order statistic: the least value after k, up to the next one selected.
+            end = count
+            if k < middle:
+                end = middle + 1
+            elif k < above:
+                end = above + 1
+            following = value if k + 1 > last else _least(column, k + 1, end)
+            result[index, axis] = value * (1.0 - weight) + following * weight
+    return result
+
+
+@numba.njit(cache=True, nogil=True)
 def _median(values: FloatArray) -> float:  # pragma: no cover - compiled
     """`np.median` of a non-empty array without NaN, rearranging it: the middle order statistic,
     or the mean of the two middle ones (the lower is the largest value left of the upper)."""

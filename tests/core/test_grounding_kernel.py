@@ -12,8 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
-from core.geometry import camera_to_world, column_quantiles, ground_detection
-from core.grounding_kernel import _eroded, _median
+from core.geometry import camera_to_world, ground_detection
+from core.grounding_kernel import _eroded, _median, percentile_box
 from core.masks import Mask
 from core.observation import Detection, Frame, Intrinsics
 from core.params import ProposalParams
@@ -74,9 +74,22 @@ def reference_grounding(
     )
     points = camera_to_world(camera, pose)
     low, median_point, high = column_quantiles(
-        points, tuple(q / 100.0 for q in (p.extent_percentiles[0], 50.0, p.extent_percentiles[1]))
+        points, (p.extent_percentiles[0] / 100.0, 0.5, p.extent_percentiles[1] / 100.0)
     )
     return median_point, np.maximum(high - low, p.min_extent_m), inlier_pixels, float(low[2])
+
+
+def column_quantiles(points: np.ndarray, fractions: tuple[float, ...]) -> np.ndarray:
+    """Each column's quantiles at `fractions` (rows), numpy's linear method as a (1 - w) + b w
+    between the order statistics a and b around the position, selected by np.partition."""
+    last = points.shape[0] - 1
+    positions = [fraction * last for fraction in fractions]
+    low = [math.floor(position) for position in positions]
+    high = [min(index + 1, last) for index in low]
+    selected = np.partition(points.T, sorted({*low, *high}), axis=1)
+    weight = np.array([position - index for position, index in zip(positions, low, strict=True)])
+    result: np.ndarray = (selected[:, low] * (1.0 - weight) + selected[:, high] * weight).T
+    return result
 
 
 EDGE_DEPTHS = (0.0, np.nan, np.inf, -np.inf, NEAR, FAR, np.nextafter(NEAR, 0), 6.0000005)
@@ -207,3 +220,18 @@ def test_the_kernel_s_median_is_numpy_s() -> None:
             if rounding is not None:
                 values = np.round(values, rounding)  # ties, and many equal values
             assert _median(values.copy()) == float(np.median(values))
+
+
+@pytest.mark.parametrize("fractions", [(0.05, 0.95), (0.0, 1.0), (0.49, 0.51), (0.01, 0.99)])
+def test_the_percentile_box_is_numpy_s_quantiles(fractions: tuple[float, float]) -> None:
+    rng = np.random.default_rng(9)
+    low, high = fractions
+    for size in [*range(1, 25), 100, 101, 1999]:
+        for rounding in (None, 1):
+            points = rng.normal(0.0, 2.0, (size, 3))
+            if rounding is not None:
+                points = np.round(points, rounding)  # ties
+            expected = column_quantiles(points, (low, 0.5, high))
+            assert np.array_equal(percentile_box(points, low, high), expected)
+            # numpy's own quantiles, to its rounding
+            assert np.allclose(expected, np.quantile(points, [low, 0.5, high], axis=0))
