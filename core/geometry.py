@@ -72,6 +72,11 @@ def ground_detection(
     bounded (a batch may carry hundreds of full-frame masks). `core.grounding_kernel` computes
     this in one pass over the mask's runs."""
     depth = frame.depth.reshape(-1)
+    if (detection.mask.height, detection.mask.width) != frame.depth.shape:  # as the codec does
+        raise ValueError(
+            f"a {detection.mask.height} x {detection.mask.width} mask on a depth image of "
+            f"{frame.depth.shape}"
+        )
     if depth.dtype != np.float32:
         depth = depth.astype(np.float64)
     in_dtype = depth.dtype.type  # the range compared in the depth's precision, as numpy would

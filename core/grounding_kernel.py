@@ -1,14 +1,16 @@
-"""One mask's valid, interior and inlier depth (section 3.2), compiled by numba.
+"""One mask's valid, interior and inlier depth, and its percentile box (section 3.2), compiled
+by numba.
 
-`ground_detection` in `core.geometry` states the rule in numpy: the mask's pixels with depth in
-range, the interior left by a square erosion of the mask cut to the valid pixels' box, the
-median and MAD of the interior's depth (or of all valid depth when the interior is small), and
-the camera-frame points of the pixels within the band. Those are some thirty array operations
-on a mask of a few thousand pixels, where each operation's own cost outweighs its work. This
-kernel walks the mask's run lengths once and computes the same values, bit for bit: integer
-steps and order statistics are exact, and each floating-point expression is the numpy one's,
-in its order, with depth compared in its own precision as numpy compares an array with a
-Python float. The tests compare it with the numpy rule on random masks and depth.
+The rule (`core.geometry.ground_detection`): the mask's pixels with depth in range, the
+interior left by a square erosion of the mask cut to the valid pixels' box, the median and MAD
+of the interior's depth (or of all valid depth when the interior is small), and the points of
+the pixels within the band; their median and percentile box. In numpy those were some thirty
+array operations on a mask of a few thousand pixels, where each operation's own cost outweighed
+its work. These kernels walk the mask's run lengths once and compute the same values, bit for
+bit: integer steps and order statistics are exact, and each floating-point expression is the
+numpy one's, in its order, with depth compared in its own precision as numpy compares an array
+with a Python float. tests/core/test_grounding_kernel.py keeps the numpy statement of the rule
+and compares the two on random masks and depth.
 """
 
 from __future__ import annotations
@@ -32,9 +34,11 @@ def _select(values: FloatArray, k: int) -> None:  # pragma: no cover - compiled
         pivot = max(min(a, b), min(max(a, b), c))
         i, j = lo, hi - 1
         while i <= j:
-            while values[i] < pivot:
+            # The bounds are checked too: no value scanned past the array's ends, whatever it
+            # holds (a NaN, which compares false both ways, could not stop a plain scan).
+            while i < hi and values[i] < pivot:
                 i += 1
-            while values[j] > pivot:
+            while j >= lo and values[j] > pivot:
                 j -= 1
             if i <= j:
                 values[i], values[j] = values[j], values[i]

@@ -235,3 +235,11 @@ def test_the_percentile_box_is_numpy_s_quantiles(fractions: tuple[float, float])
             assert np.array_equal(percentile_box(points, low, high), expected)
             # numpy's own quantiles, to its rounding
             assert np.allclose(expected, np.quantile(points, [low, 0.5, high], axis=0))
+
+
+def test_a_mask_of_another_size_than_the_depth_is_refused() -> None:
+    intrinsics = Intrinsics(20, 10, 18.0, 18.0, 9.5, 4.5)
+    frame = Frame("f", 0.0, intrinsics, np.eye(4), np.ones((10, 20), np.float32), ())
+    transposed = Detection("box", 0.9, "object", Mask.from_array(np.ones((20, 10), bool)), None)
+    with pytest.raises(ValueError, match="20 x 10 mask"):
+        ground_detection(transposed, frame, ProposalParams(), NEAR, FAR)
