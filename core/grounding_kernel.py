@@ -15,15 +15,16 @@ and compares the two on random masks and depth.
 
 from __future__ import annotations
 
-import numba
 import numpy as np
 import numpy.typing as npt
+
+from core.compiled import compiled
 
 FloatArray = npt.NDArray[np.float64]
 IntArray = npt.NDArray[np.int64]
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _select(values: FloatArray, k: int) -> None:  # pragma: no cover - compiled
     """Rearrange `values` in place so that values[k] is its k-th smallest, none left of it
     larger and none right of it smaller (Hoare's selection with a median-of-three pivot)."""
@@ -54,13 +55,13 @@ def _select(values: FloatArray, k: int) -> None:  # pragma: no cover - compiled
         values[lo], values[lo + 1] = values[lo + 1], values[lo]
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _select_in(values: FloatArray, k: int, lo: int, hi: int) -> None:  # pragma: no cover
     """`_select` within values[lo:hi] (k in it): the rest of the array is left as it is."""
     _select(values[lo:hi], k - lo)
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _least(values: FloatArray, lo: int, hi: int) -> float:  # pragma: no cover - compiled
     """The least of values[lo:hi] (not empty)."""
     least = values[lo]
@@ -70,7 +71,7 @@ def _least(values: FloatArray, lo: int, hi: int) -> float:  # pragma: no cover -
     return float(least)
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def percentile_box(points: FloatArray, low: float, high: float) -> FloatArray:  # pragma: no cover
     """Rows: each column's `low`, median and `high` quantiles (fractions, low < 0.5 < high),
     linearly interpolated as numpy's default method is (between the order statistics a and b
@@ -108,7 +109,7 @@ def percentile_box(points: FloatArray, low: float, high: float) -> FloatArray:  
     return result
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _median(values: FloatArray) -> float:  # pragma: no cover - compiled
     """`np.median` of a non-empty array without NaN, rearranging it: the middle order statistic,
     or the mean of the two middle ones (the lower is the largest value left of the upper)."""
@@ -123,7 +124,7 @@ def _median(values: FloatArray) -> float:  # pragma: no cover - compiled
     return float((lower + values[middle]) / 2)
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _mask_box(runs: IntArray, height: int) -> tuple[int, int, int, int]:  # pragma: no cover
     """(top, bottom, left, right), inclusive, of the pixels a COCO run-length mask sets
     (column-major runs, zeros first); (0, -1, 0, -1) for an empty mask."""
@@ -147,7 +148,7 @@ def _mask_box(runs: IntArray, height: int) -> tuple[int, int, int, int]:  # prag
     return top, bottom, left, right
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _draw(
     runs: IntArray, height: int, top: int, left: int, rows: int, cols: int
 ) -> npt.NDArray[np.bool_]:  # pragma: no cover
@@ -163,7 +164,7 @@ def _draw(
     return drawn
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _eroded(crop: npt.NDArray[np.bool_], radius: int) -> npt.NDArray[np.bool_]:  # pragma: no cover
     """Binary erosion by a (2r+1)^2 square, outside the array counting as background
     (`core.geometry.erode_square`)."""
@@ -187,7 +188,7 @@ def _eroded(crop: npt.NDArray[np.bool_], radius: int) -> npt.NDArray[np.bool_]: 
     return eroded
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def mask_points(
     runs: IntArray,
     height: int,

@@ -15,11 +15,11 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-import numba
 import numpy as np
 import numpy.typing as npt
 from scipy.ndimage import minimum_filter1d
 
+from core.compiled import compiled
 from core.events import OccupancyEvidence
 from core.geometry import backproject_pixels, camera_to_world
 from core.observation import Frame
@@ -82,17 +82,17 @@ def _median_depth(
     return medians
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@compiled(inline="always")
 def _usable(value: float) -> bool:  # pragma: no cover - compiled
     return (value > 0) & (value < np.inf)  # NaN compares false
 
 
-@numba.njit(cache=True, nogil=True, inline="always")
+@compiled(inline="always")
 def _ordered(a: float, b: float) -> tuple[float, float]:  # pragma: no cover - compiled
     return min(a, b), max(a, b)
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _median_of_nine(
     p0: float,
     p1: float,
@@ -127,7 +127,7 @@ def _median_of_nine(
     return p4
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _lower_usable_medians(
     depth: npt.NDArray[Any], rows: IntArray, cols: IntArray, half: int
 ) -> FloatArray:  # pragma: no cover - compiled
@@ -220,7 +220,7 @@ class _Window:
         return flat
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _marked_cells(
     x: FloatArray,
     y: FloatArray,

@@ -18,10 +18,10 @@ from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Literal, NamedTuple
 
-import numba
 import numpy as np
 import numpy.typing as npt
 
+from core.compiled import compiled
 from core.geometry import box_samples, project, world_to_camera
 from core.observation import Frame
 from core.params import Params, VisibilityParams
@@ -262,7 +262,7 @@ def _bbox_area(owner: npt.NDArray[np.intp], u: FloatArray, v: FloatArray, count:
     return area
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _owner_box_areas(
     owner: npt.NDArray[np.intp], u: FloatArray, v: FloatArray, count: int
 ) -> FloatArray:  # pragma: no cover - compiled
@@ -311,7 +311,7 @@ def _window_depth(
     return measured
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled()
 def _windows(
     depth: npt.NDArray[np.float32],
     u: npt.NDArray[np.intp],
