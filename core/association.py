@@ -104,7 +104,10 @@ def _distances(
     proposal, the value `np.linalg.norm(..., axis=1)` gives ((dx^2 + dy^2) + dz^2, rooted),
     computed by columns for many proposals at once, a few megabytes at a time."""
     points = np.array([p.center for p in proposals], dtype=np.float64)
-    low, high = points.min(axis=0) - reach, points.max(axis=0) + reach
+    # The box is widened past `reach` by far more than a rounding error, so that no track the
+    # norm puts within reach falls outside it (a track outside is farther on one axis alone).
+    margin = reach + 1e-6 + 1e-9 * float(np.abs(points).max())
+    low, high = points.min(axis=0) - margin, points.max(axis=0) + margin
     rows = np.flatnonzero(((centers >= low) & (centers <= high)).all(axis=1))
     columns = np.ascontiguousarray(centers[rows].T)
     per_chunk = max(1, (1 << 18) // max(1, rows.size))

@@ -270,16 +270,18 @@ def test_labels_never_cover_each_other_and_a_scale_bar_fits(
         page.locator("#show-all").check()  # every track, the removed mug among them
         canvas = page.locator("#map")
         expect(canvas).not_to_have_attribute("data-nodes", "1")
-        nodes = int(canvas.get_attribute("data-nodes") or 0)
-        boxes = json.loads(canvas.get_attribute("data-label-boxes") or "[]")
+        # One render's attributes, read at once: the view may draw again between two reads.
+        drawn = canvas.evaluate("el => ({...el.dataset})")
+        nodes = int(drawn.get("nodes") or 0)
+        boxes = json.loads(drawn.get("labelBoxes") or "[]")
         assert 1 <= len(boxes) <= nodes
         assert overlapping(boxes) == []
-        metres_text = canvas.get_attribute("data-scale-bar") or ""
+        metres_text = drawn.get("scaleBar") or ""
         match = re.fullmatch(r"(\d+) (m|cm)", metres_text)
         assert match, metres_text
         metres = int(match.group(1)) / (100 if match.group(2) == "cm" else 1)
-        bar_px = float(canvas.get_attribute("data-scale-bar-px") or 0)
-        px_per_m = float(canvas.get_attribute("data-px-per-m") or 0)
+        bar_px = float(drawn.get("scaleBarPx") or 0)
+        px_per_m = float(drawn.get("pxPerM") or 0)
         assert bar_px == pytest.approx(metres * px_per_m, abs=0.1)
         assert 48 <= bar_px <= 120  # a 1, 2 or 5 step that fits in 120 pixels
         shot(page, f"7-labels-{viewport[0]}")
