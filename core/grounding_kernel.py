@@ -73,26 +73,25 @@ def _least(values: FloatArray, lo: int, hi: int) -> float:  # pragma: no cover -
 
 @compiled()
 def percentile_box(points: FloatArray, low: float, high: float) -> FloatArray:  # pragma: no cover
-    """Rows: each column's `low`, median and `high` quantiles (fractions, low < 0.5 < high),
-    linearly interpolated as numpy's default method is (between the order statistics a and b
-    around the position, a (1 - w) + b w; np.quantile rounds its own formula differently). The
-    median's order statistic is selected first, the low one left of it and the high one right
-    of it; the statistic after each is the least value between it and the next one selected."""
+    """Rows: each column's `low`, median and `high` quantiles (fractions, low < high), linearly
+    interpolated as numpy's default method is (between the order statistics a and b around the
+    position, a (1 - w) + b w; np.quantile rounds its own formula differently). The middle of
+    the three order statistics is selected first, the least of them left of it and the greatest
+    right of it; the statistic after each is the least value between it and the next selected."""
     count = points.shape[0]
     last = count - 1
     result = np.empty((3, points.shape[1]))
     column = np.empty(count)
     fractions = (low, 0.5, high)
+    ks = sorted([int(np.floor(fraction * last)) for fraction in fractions])
     for axis in range(points.shape[1]):
         for row in range(count):
             column[row] = points[row, axis]
-        middle = int(np.floor(0.5 * last))
-        below, above = int(np.floor(low * last)), int(np.floor(high * last))
-        _select(column, middle)
-        if below < middle:
-            _select_in(column, below, 0, middle)
-        if above > middle:
-            _select_in(column, above, middle + 1, count)
+        _select(column, ks[1])
+        if ks[0] < ks[1]:
+            _select_in(column, ks[0], 0, ks[1])
+        if ks[2] > ks[1]:
+            _select_in(column, ks[2], ks[1] + 1, count)
         for index in range(3):
             position = fractions[index] * last
             k = int(np.floor(position))
@@ -100,10 +99,10 @@ def percentile_box(points: FloatArray, low: float, high: float) -> FloatArray:  
             value = column[k]
             # The next order statistic: the least value after k, up to the next one selected.
             end = count
-            if k < middle:
-                end = middle + 1
-            elif k < above:
-                end = above + 1
+            for selected in ks:
+                if selected > k:
+                    end = selected + 1
+                    break
             following = value if k + 1 > last else _least(column, k + 1, end)
             result[index, axis] = value * (1.0 - weight) + following * weight
     return result
@@ -166,8 +165,8 @@ def _draw(
 
 @compiled()
 def _eroded(crop: npt.NDArray[np.bool_], radius: int) -> npt.NDArray[np.bool_]:  # pragma: no cover
-    """Binary erosion by a (2r+1)^2 square, outside the array counting as background
-    (`core.geometry.erode_square`)."""
+    """Binary erosion by a (2r+1)^2 square, outside the array counting as background (as
+    scipy's `binary_erosion` with `border_value=0`; the tests compare the two)."""
     rows, cols = crop.shape
     across = np.zeros((rows, cols), np.bool_)
     for row in range(rows):

@@ -256,17 +256,13 @@ def _center_empty(
     return empty
 
 
-def _bbox_area(owner: npt.NDArray[np.intp], u: FloatArray, v: FloatArray, count: int) -> FloatArray:
-    """Per box, the area in pixels of the bounding box of its projected samples (0 when none)."""
-    area: FloatArray = _owner_box_areas(owner, u, v, count)
-    return area
-
-
 @compiled()
-def _owner_box_areas(
+def _bbox_area(
     owner: npt.NDArray[np.intp], u: FloatArray, v: FloatArray, count: int
 ) -> FloatArray:  # pragma: no cover - compiled
-    """`_bbox_area` in one pass: each owner's extreme u and v, then (du + 1) * (dv + 1)."""
+    """Per box, the area in pixels of the bounding box of its projected samples (0 when none,
+    or when a sample's coordinate is NaN, as numpy's minimum.at made it): each owner's extreme
+    u and v in one pass, then (du + 1) * (dv + 1)."""
     low_u, high_u = np.full(count, np.inf), np.full(count, -np.inf)
     low_v, high_v = np.full(count, np.inf), np.full(count, -np.inf)
     for index in range(owner.size):

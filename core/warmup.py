@@ -24,7 +24,7 @@ KERNELS = (
     "core.occupancy_evidence._lower_usable_medians",
     "core.occupancy_evidence._marked_cells",
     "core.visibility._windows",
-    "core.visibility._owner_box_areas",
+    "core.visibility._bbox_area",
 )
 
 

@@ -222,7 +222,11 @@ def test_the_kernel_s_median_is_numpy_s() -> None:
             assert _median(values.copy()) == float(np.median(values))
 
 
-@pytest.mark.parametrize("fractions", [(0.05, 0.95), (0.0, 1.0), (0.49, 0.51), (0.01, 0.99)])
+@pytest.mark.parametrize(
+    "fractions",
+    # Both below or both above the median too: a scene may set any low < high.
+    [(0.05, 0.95), (0.0, 1.0), (0.49, 0.51), (0.01, 0.99), (0.6, 0.9), (0.1, 0.3), (0.5, 1.0)],
+)
 def test_the_percentile_box_is_numpy_s_quantiles(fractions: tuple[float, float]) -> None:
     rng = np.random.default_rng(9)
     low, high = fractions
