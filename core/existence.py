@@ -244,7 +244,7 @@ def _embedding_sum(
     embeddings = [e for e in embeddings if e.shape[0] == dim]
     if not embeddings:
         return None, 0
-    return tuple(float(v) for v in np.sum(embeddings, axis=0)), len(embeddings)
+    return tuple(np.sum(embeddings, axis=0).tolist()), len(embeddings)
 
 
 def new_fixture(

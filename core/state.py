@@ -114,12 +114,21 @@ class Track:
         return {parent: weight / total for parent, weight in sorted(self.parent_evidence.items())}
 
     def embedding(self) -> npt.NDArray[np.float64] | None:
-        """Appearance averaged by observation count, then l2-normalized."""
+        """Appearance averaged by observation count, then l2-normalized (read-only: computed
+        once per track value, as a batch's stages ask for it many times)."""
+        return self._unit_embedding
+
+    @cached_property
+    def _unit_embedding(self) -> npt.NDArray[np.float64] | None:
         if self.embedding_sum is None:
             return None
         vector = np.asarray(self.embedding_sum, dtype=np.float64)
         norm = float(np.linalg.norm(vector))
-        return vector / norm if norm > 0 else None
+        if norm <= 0:
+            return None
+        unit = vector / norm
+        unit.flags.writeable = False
+        return unit
 
     def covariance(self) -> list[list[float]]:
         """Sigma_i over the recent centers (zero until two centers exist)."""

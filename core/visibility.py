@@ -189,17 +189,20 @@ def sample_columns(
     if count == 0:
         return SampleColumns(np.zeros(0, np.intp), np.zeros(0), np.zeros(0), np.zeros(0, np.bool_))
     per_track = params.box_samples_per_axis**3
+    rows = _within_range(centers, extents, frame.pose, params)
     samples = world_to_camera(
-        box_samples(centers, extents, params.box_samples_per_axis).reshape(-1, 3), frame.pose
+        box_samples(centers[rows], extents[rows], params.box_samples_per_axis).reshape(-1, 3),
+        frame.pose,
     )
     expected = samples[:, 2]
     in_range = (expected >= params.min_range_m) & (expected <= params.max_range_m)
     candidate = np.flatnonzero(in_range)
     u, v = project(samples[candidate], frame.intrinsics)
     width, height = frame.intrinsics.width, frame.intrinsics.height
-    full_area = _bbox_area(candidate // per_track, u, v, count)  # the box's projection, unclipped
+    owner = rows[candidate // per_track]
+    full_area = _bbox_area(owner, u, v, count)  # the box's projection, unclipped
     inside = (u >= 0) & (u <= width - 1) & (v >= 0) & (v <= height - 1)
-    candidate, u, v = candidate[inside], u[inside], v[inside]
+    candidate, u, v, owner = candidate[inside], u[inside], v[inside], owner[inside]
     ok = np.ones(candidate.size, dtype=bool)
     if occlusion_test and candidate.size:
         measured = _window_depth(
@@ -209,7 +212,6 @@ def sample_columns(
             ok = (measured > 0) & (measured > expected[candidate] + params.occlusion_margin_m)
         else:
             ok = (measured > 0) & (measured + params.occlusion_margin_m >= expected[candidate])
-    owner = candidate // per_track
     passed = np.bincount(owner[ok], minlength=count)
     in_image = np.bincount(owner, minlength=count)
     if miss_evidence == "free_space":
@@ -230,6 +232,23 @@ def sample_columns(
     else:
         empty = np.ones(count, dtype=np.bool_)
     return SampleColumns(passed, fraction, in_image_share, empty)
+
+
+def _within_range(
+    centers: FloatArray, extents: FloatArray, pose: FloatArray, params: VisibilityParams
+) -> npt.NDArray[np.intp]:
+    """The boxes some sample of which may lie in the camera's range: the others' samples are
+    all nearer than `min_range_m` or farther than `max_range_m`, so they pass nothing and
+    project nowhere, and their samples need not be made. A sample's depth lies within half the
+    box's extent, measured along the optical axis, of its centre's; the bound is widened by
+    far more than the rounding of either, so no box a sample of which is in range is left out."""
+    axis = pose[:3, 2]  # the camera's z axis in the world: depth = (p - t) . axis
+    depth = (centers - pose[:3, 3]) @ axis
+    reach = 0.5 * np.abs(extents) @ np.abs(axis)
+    slack = 1e-6 + 1e-9 * (np.abs(depth) + reach)
+    near_enough = depth - reach - slack <= params.max_range_m
+    far_enough = depth + reach + slack >= params.min_range_m
+    return np.flatnonzero(near_enough & far_enough)
 
 
 def _center_empty(

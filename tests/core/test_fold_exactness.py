@@ -53,3 +53,26 @@ def test_evolved_copies_the_fields_and_drops_the_cached_label() -> None:
     assert changed.center == track.center and changed.track_id == track.track_id
     same = track.evolved()
     assert same == track and "label" not in same.__dict__
+
+
+def test_the_appearance_is_computed_once_read_only_and_anew_for_a_changed_sum() -> None:
+    track = Track(
+        track_id="trk-000001",
+        kind="object",
+        lifecycle="tentative",
+        class_evidence={"mug": 1.0},
+        existence_logodds=0.5,
+        center=(1.0, 2.0, 3.0),
+        extent=(0.1, 0.1, 0.1),
+        recent_centers=((1.0, 2.0, 3.0),),
+        embedding_sum=(3.0, 4.0),
+        embedding_count=2,
+    )
+    unit = track.embedding()
+    assert unit is not None and unit.tolist() == [0.6, 0.8]
+    assert track.embedding() is unit and not unit.flags.writeable
+    changed = track.evolved(embedding_sum=(0.0, 2.0))
+    again = changed.embedding()
+    assert again is not None and again.tolist() == [0.0, 1.0]
+    assert track.evolved(embedding_sum=(0.0, 0.0)).embedding() is None  # no direction
+    assert track.evolved(embedding_sum=None).embedding() is None

@@ -58,3 +58,58 @@ def test_each_box_s_projected_area_is_its_samples_bounding_box() -> None:
             continue
         expected = (np.max(u[mine]) - np.min(u[mine]) + 1) * (np.max(v[mine]) - np.min(v[mine]) + 1)
         assert np.array_equal(got[box], expected, equal_nan=True)
+
+
+def _turned(yaw: float, pitch: float, position: np.ndarray) -> np.ndarray:
+    """A camera-to-world pose looking along a yaw and a pitch (OpenCV axes)."""
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    forward = np.array([cy * cp, sy * cp, sp])
+    right = np.cross(forward, [0.0, 0.0, 1.0])
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    pose = np.eye(4)
+    pose[:3, :3] = np.column_stack((right, down, forward))
+    pose[:3, 3] = position
+    return pose
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_boxes_out_of_range_are_left_out_without_changing_any_column(
+    seed: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """`sample_columns` makes samples only for the boxes that may reach the camera's range
+    (`_within_range`); every column is the same, bit for bit, as when every box is sampled, and
+    a box left out has no sample in range."""
+    import core.visibility as visibility
+    from core.geometry import box_samples, world_to_camera
+    from core.observation import Frame, Intrinsics
+
+    rng = np.random.default_rng(seed)
+    params = VisibilityParams()
+    intrinsics = Intrinsics(64, 48, 50.0, 50.0, 31.5, 23.5)
+    depth = rng.uniform(0.2, 8.0, (48, 64)).astype(np.float32)
+    depth[rng.random(depth.shape) < 0.1] = 0.0
+    pose = _turned(rng.uniform(-np.pi, np.pi), rng.uniform(-0.6, 0.2), rng.uniform(-2, 2, 3))
+    frame = Frame("f", 0.0, intrinsics, pose, depth)
+    forward = pose[:3, 2]
+    # Boxes all around the camera, and boxes whose extent puts a face right on either end of
+    # the range along the optical axis.
+    around = pose[:3, 3] + rng.uniform(-9.0, 9.0, (300, 3))
+    extents = rng.uniform(0.02, 1.5, (400, 3))
+    ends = np.repeat([params.min_range_m, params.max_range_m], 50)
+    reach = 0.5 * np.abs(extents[300:]) @ np.abs(forward)
+    sign = rng.choice([-1.0, 1.0], 100)
+    on_edges = pose[:3, 3] + (ends + sign * reach)[:, None] * forward
+    centers = np.concatenate((around, on_edges))
+    got = visibility.sample_columns(centers, extents, frame, params)
+    kept = visibility._within_range(centers, extents, pose, params)
+    assert 0 < kept.size < centers.shape[0]
+    monkeypatch.setattr(visibility, "_within_range", lambda c, *_: np.arange(c.shape[0]))
+    every = visibility.sample_columns(centers, extents, frame, params)
+    for name in every._fields:
+        assert np.array_equal(getattr(got, name), getattr(every, name)), name
+    samples = world_to_camera(
+        box_samples(centers, extents, params.box_samples_per_axis).reshape(-1, 3), pose
+    )[:, 2].reshape(centers.shape[0], -1)
+    in_range = ((samples >= params.min_range_m) & (samples <= params.max_range_m)).any(axis=1)
+    assert set(np.flatnonzero(in_range).tolist()) <= set(kept.tolist())
