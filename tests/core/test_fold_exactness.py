@@ -35,8 +35,8 @@ def test_box_equals_the_formula_bit_for_bit(boxes: list[tuple[Vec3, Vec3]]) -> N
     assert _bits(_box(boxes)) == _bits(_formula(boxes))
 
 
-def test_evolved_copies_the_fields_and_drops_the_cached_label() -> None:
-    track = Track(
+def _track(embedding_sum: tuple[float, ...] | None = None) -> Track:
+    return Track(
         track_id="trk-000001",
         kind="object",
         lifecycle="tentative",
@@ -45,7 +45,13 @@ def test_evolved_copies_the_fields_and_drops_the_cached_label() -> None:
         center=(1.0, 2.0, 3.0),
         extent=(0.1, 0.1, 0.1),
         recent_centers=((1.0, 2.0, 3.0),),
+        embedding_sum=embedding_sum,
+        embedding_count=0 if embedding_sum is None else 2,
     )
+
+
+def test_evolved_copies_the_fields_and_drops_the_cached_label() -> None:
+    track = _track()
     assert track.label == "mug" and "label" in track.__dict__
     changed = track.evolved(class_evidence={"book": 2.0, "mug": 1.0})
     assert "label" not in changed.__dict__ and changed.label == "book"
@@ -56,18 +62,7 @@ def test_evolved_copies_the_fields_and_drops_the_cached_label() -> None:
 
 
 def test_the_appearance_is_computed_once_read_only_and_anew_for_a_changed_sum() -> None:
-    track = Track(
-        track_id="trk-000001",
-        kind="object",
-        lifecycle="tentative",
-        class_evidence={"mug": 1.0},
-        existence_logodds=0.5,
-        center=(1.0, 2.0, 3.0),
-        extent=(0.1, 0.1, 0.1),
-        recent_centers=((1.0, 2.0, 3.0),),
-        embedding_sum=(3.0, 4.0),
-        embedding_count=2,
-    )
+    track = _track(embedding_sum=(3.0, 4.0))
     unit = track.embedding()
     assert unit is not None and unit.tolist() == [0.6, 0.8]
     assert track.embedding() is unit and not unit.flags.writeable
