@@ -269,3 +269,27 @@ def test_a_rejected_batch_is_one_log_line_and_a_bug_keeps_its_traceback(
     assert status(client, scene_id, "b0")["status"] == "dead"
     (record,) = [r for r in caplog.records if "failed (attempt 1)" in r.getMessage()]
     assert bool(record.exc_info) is traceback
+
+
+def test_expired_leases_are_looked_for_once_every_third_of_a_lease(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    now = [1000.0]
+    monkeypatch.setattr(container.queue, "clock", lambda: now[0])
+    container.settings.lease_seconds = 30.0
+    scene_id = new_scene(client)
+    post(client, scene_id, "b0")
+    assert container.queue.claim("crashed", 30.0) is not None  # its worker dies holding it
+    looked: list[float] = []
+    real = container.queue.expired
+    monkeypatch.setattr(container.queue, "expired", lambda: looked.append(now[0]) or real())
+    worker = Worker(container, name="alive")
+    for at in (1000.0, 1005.0, 1009.9, 1010.0, 1025.0, 1029.0):
+        now[0] = at
+        assert not worker.run_once()  # b0 is held, by a worker that no longer renews it
+    assert looked == [1000.0, 1010.0, 1025.0]
+    now[0] = 1035.0  # the lease lapsed at 1030: the next look returns b0 to the queue
+    assert not worker.run_once()  # b0 waits for its backoff
+    assert looked[-1] == 1035.0
+    settled = status(client, scene_id, "b0")
+    assert settled["status"] == "failed" and "lease expired" in settled["error"]
