@@ -282,7 +282,12 @@ def test_expired_leases_are_looked_for_once_every_third_of_a_lease(
     assert container.queue.claim("crashed", 30.0) is not None  # its worker dies holding it
     looked: list[float] = []
     real = container.queue.expired
-    monkeypatch.setattr(container.queue, "expired", lambda: looked.append(now[0]) or real())
+
+    def expired() -> list[Any]:
+        looked.append(now[0])
+        return real()
+
+    monkeypatch.setattr(container.queue, "expired", expired)
     worker = Worker(container, name="alive")
     for at in (1000.0, 1005.0, 1009.9, 1010.0, 1025.0, 1029.0):
         now[0] = at
