@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Annotated, Any, TypedDict, Unpack
@@ -89,6 +89,8 @@ class Track:
         for name in _CACHED:
             state.pop(name, None)
         state.update(changes)
+        if "_packed" in state and state.keys() >= _PACKED_FIELDS:
+            del state["_packed"]  # both fields read or replaced: the block is not needed
         return copy
 
     @cached_property
@@ -230,6 +232,66 @@ class TrackChanges(TypedDict, total=False):
     box: tuple[float, ...] | None
     capture_id: str | None
     first_observed: float | None
+
+
+@dataclass(frozen=True, eq=False)
+class PackedFloats:
+    """A track's recent centers and appearance sum as a snapshot stores them: spans of one
+    float64 block, made into the tuples a track holds only when they are read. Decoding a
+    500-track snapshot made 80k Python floats and 16k tuples, most of which an `as_of` never
+    reads (the graph does not; a tail of events touches a few tracks)."""
+
+    block: npt.NDArray[np.float64]
+    centers: tuple[int, int]  # where the centers' coordinates start in the block, and how many
+    embedding: tuple[int, int] | None  # the same for the appearance sum (None: no appearance)
+
+    def recent_centers(self) -> tuple[Vec3, ...]:
+        """The centers, three coordinates each."""
+        start, count = self.centers
+        coordinates = iter(self.block[start : start + count].tolist())
+        return tuple(zip(coordinates, coordinates, coordinates, strict=True))
+
+    def embedding_sum(self) -> tuple[float, ...] | None:
+        """The appearance sum."""
+        if self.embedding is None:
+            return None
+        start, count = self.embedding
+        return tuple(self.block[start : start + count].tolist())
+
+
+class _Packed:
+    """A Track field that a track decoded from a snapshot may still hold packed (its `_packed`,
+    a `PackedFloats`): made the first time it is read, then kept in the track like any field
+    (as `cached_property` keeps its value). A track built any other way holds the field itself,
+    which attribute lookup finds before this descriptor, so it costs such tracks nothing."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+
+    def __get__(self, track: Track | None, owner: type | None = None) -> Any:
+        if track is None:
+            return self
+        packed: PackedFloats | None = track.__dict__.get("_packed")
+        if packed is None:
+            raise AttributeError(f"Track has no {self.name}")
+        value = getattr(packed, self.name)()
+        track.__dict__[self.name] = value
+        return value
+
+
+_PACKED_FIELDS = frozenset({"recent_centers", "embedding_sum"})
+for _name in sorted(_PACKED_FIELDS):  # installed after the dataclass: its __init__ is unchanged
+    setattr(Track, _name, _Packed(_name))
+
+
+def packed_track(values: Iterable[tuple[str, Any]], packed: PackedFloats) -> Track:
+    """A track from (name, value) of every field but the two `packed` holds (a snapshot's
+    decode: no check, no copy)."""
+    track = object.__new__(Track)
+    state = track.__dict__
+    state.update(values)
+    state["_packed"] = packed
+    return track
 
 
 _TRACK_FIELDS = frozenset(f.name for f in fields(Track))

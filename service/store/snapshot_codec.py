@@ -12,7 +12,7 @@ import orjson
 import zstandard
 
 from core.fixture_map import VoxelMap
-from core.state import SNAPSHOT_FORMAT_VERSION, SceneState, Track
+from core.state import SNAPSHOT_FORMAT_VERSION, PackedFloats, SceneState, Track, packed_track
 
 __all__ = [
     "READABLE_VERSIONS",
@@ -105,15 +105,17 @@ def decode_snapshot(body: bytes, version: int = SNAPSHOT_VERSION) -> SceneState:
     voxels, end = _voxel_map(raw, start + length, record.get("voxels"))
     floats_start = start + length
     float_count = (end - floats_start) // 8  # between the JSON and the voxel map, not copied
-    floats = np.frombuffer(raw, dtype="<f8", count=float_count, offset=floats_start).tolist()
+    # Its own copy: the tracks keep it until they are read, not the whole decompressed body.
+    block = np.frombuffer(raw, dtype="<f8", count=float_count, offset=floats_start).astype(
+        np.float64
+    )
     columns = record["tracks"]
     if not isinstance(columns, dict) or columns.keys() != set(TRACK_FIELDS):
         raise ValueError("snapshot tracks do not hold the track fields")
     count = len(columns["track_id"])
     if any(len(columns[name]) != count for name in TRACK_FIELDS):
         raise ValueError("snapshot track columns differ in length")
-    centers, embeddings = _split(floats, columns["recent_centers"], columns["embedding_sum"])
-    columns["recent_centers"], columns["embedding_sum"] = centers, embeddings
+    packed = _packed(block, columns.pop("recent_centers"), columns.pop("embedding_sum"))
     columns["existence_logodds"] = list(map(float, columns["existence_logodds"]))
     columns["center"] = list(map(tuple, columns["center"]))
     columns["extent"] = list(map(tuple, columns["extent"]))
@@ -121,10 +123,8 @@ def decode_snapshot(body: bytes, version: int = SNAPSHOT_VERSION) -> SceneState:
         columns[name] = [None if value is None else tuple(value) for value in columns[name]]
     names = tuple(columns)
     tracks = {}
-    new = object.__new__
-    for row in zip(*columns.values(), strict=True):
-        track = new(Track)
-        track.__dict__.update(zip(names, row, strict=True))
+    for row, floats in zip(zip(*columns.values(), strict=True), packed, strict=True):
+        track = packed_track(zip(names, row, strict=True), floats)
         tracks[track.track_id] = track
     if len(tracks) != count:
         raise ValueError("snapshot tracks repeat an id")
@@ -151,39 +151,38 @@ def _voxel_map(raw: bytes, floats_start: int, shape: Any) -> tuple[VoxelMap, int
     return VoxelMap(keys, counts, sums.reshape(count, width)), end
 
 
-def _split(
-    floats: list[float], center_counts: list[int | None], embedding_counts: list[int | None]
-) -> tuple[list[tuple[tuple[float, float, float], ...]], list[tuple[float, ...] | None]]:
-    """Each track's recent centers and embedding sum from the float block, by their counts."""
+def _packed(
+    block: npt.NDArray[np.float64],
+    center_counts: list[int | None],
+    embedding_counts: list[int | None],
+) -> list[PackedFloats]:
+    """Each track's recent centers and embedding sum as spans of the float block (the centers
+    of every track, then the embeddings), by their counts."""
     centers_total = 0
     for count in center_counts:
-        if not isinstance(count, int) or count < 0 or count % 3:
+        if not isinstance(count, int) or isinstance(count, bool) or count < 0 or count % 3:
             raise ValueError(f"snapshot track with {count} center values")
         centers_total += count
     embedding_total = 0
     for count in embedding_counts:
-        if count is not None and (not isinstance(count, int) or count < 0):
+        if count is not None and (
+            not isinstance(count, int) or isinstance(count, bool) or count < 0
+        ):
             raise ValueError(f"snapshot track with {count} embedding values")
         embedding_total += count or 0
-    if centers_total + embedding_total != len(floats):
-        raise ValueError(f"snapshot float block of {len(floats)} values does not fit its tracks")
-    coordinates = iter(floats[:centers_total])
-    points = list(zip(coordinates, coordinates, coordinates, strict=True))
-    centers = []
-    point = 0
-    for count in center_counts:
-        assert count is not None  # checked above
-        centers.append(tuple(points[point : point + count // 3]))
-        point += count // 3
-    embeddings: list[tuple[float, ...] | None] = []
-    position = centers_total
-    for count in embedding_counts:
-        if count is None:
-            embeddings.append(None)
-        else:
-            embeddings.append(tuple(floats[position : position + count]))
-            position += count
-    return centers, embeddings
+    if centers_total + embedding_total != block.size:
+        raise ValueError(f"snapshot float block of {block.size} values does not fit its tracks")
+    packed = []
+    point, position = 0, centers_total
+    for centers, embedding in zip(center_counts, embedding_counts, strict=True):
+        assert centers is not None  # checked above
+        span = None
+        if embedding is not None:
+            span = (position, embedding)
+            position += embedding
+        packed.append(PackedFloats(block, (point, centers), span))
+        point += centers
+    return packed
 
 
 def _decode_rows(record: dict[str, Any], floats: list[float]) -> SceneState:

@@ -17,7 +17,7 @@ from core.events import SceneCreated
 from core.evolve import evolve, fold
 from core.fixture_map import VoxelMap
 from core.params import Params
-from core.state import SceneState
+from core.state import SceneState, Track
 from service.store.snapshot_codec import (
     SNAPSHOT_VERSION,
     SNAPSHOT_VERSION_ROWS,
@@ -165,3 +165,24 @@ def test_a_voxel_map_that_does_not_fit_or_is_not_sorted_is_refused() -> None:
     keys[floats : floats + 16] = keys[floats + 8 : floats + 16] + keys[floats : floats + 8]
     with pytest.raises(ValueError, match="sorted"):
         decode_snapshot(body_of(header, bytes(keys)))
+
+
+def test_a_decoded_track_makes_its_float_fields_only_when_they_are_read() -> None:
+    state = _benchmark_state(1200)
+    decoded = decode_snapshot(encode_snapshot(state))
+    first, second, third = list(state.tracks)[:3]
+    track = decoded.tracks[first]
+    assert {"recent_centers", "embedding_sum"}.isdisjoint(vars(track))  # still in the block
+    assert track.recent_centers == state.tracks[first].recent_centers
+    assert "recent_centers" in vars(track) and "embedding_sum" not in vars(track)
+    assert track.embedding_sum == state.tracks[first].embedding_sum
+    assert track.embedding_sum is not None and len(track.embedding_sum) == 64
+    # A track evolved from one still packed is packed alike, until both fields are its own.
+    moved = decoded.tracks[second].evolved(center=(1.0, 2.0, 3.0))
+    assert "_packed" in vars(moved) and "recent_centers" not in vars(moved)
+    assert moved.recent_centers == state.tracks[second].recent_centers
+    replaced = decoded.tracks[third].evolved(recent_centers=(), embedding_sum=None)
+    assert "_packed" not in vars(replaced)
+    assert (replaced.recent_centers, replaced.embedding_sum) == ((), None)
+    with pytest.raises(AttributeError, match="recent_centers"):
+        _ = Track.__new__(Track).recent_centers  # neither packed nor set: no such field yet
