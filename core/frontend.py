@@ -33,7 +33,8 @@ from core.geometry import Proposal
 from core.params import AssociationParams, Params
 from core.reidentification import claimed_hypotheses, reidentifications
 from core.rules import UpdateRules
-from core.state import SceneState, TrackArrays
+from core.state import SceneState
+from core.track_arrays import TrackArrays
 from core.track_columns import TrackColumns
 from core.visibility import BatchVisibility
 
