@@ -104,8 +104,9 @@ def decode_snapshot(body: bytes, version: int = SNAPSHOT_VERSION) -> SceneState:
         raise ValueError(f"snapshot body version {version} is not supported")
     voxels, end = _voxel_map(raw, start + length, record.get("voxels"))
     floats_start = start + length
-    float_count = (end - floats_start) // 8  # between the JSON and the voxel map, not copied
-    # Its own copy: the tracks keep it until they are read, not the whole decompressed body.
+    float_count = (end - floats_start) // 8  # between the JSON and the voxel map
+    # Copied out of the body: the tracks keep the block until their floats are read (packed,
+    # `core.state.PackedFloats`), and should not keep the whole decompressed body with it.
     block = np.frombuffer(raw, dtype="<f8", count=float_count, offset=floats_start).astype(
         np.float64
     )
