@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Protocol
 
 import numpy as np
@@ -86,11 +87,16 @@ class TrackArrays:
             captured=numbers[:, 18] > 0,
         )
 
+    @cached_property
+    def position(self) -> Mapping[str, int]:
+        """Each track's row (read only: columns whose ids are the same share it)."""
+        return {track_id: row for row, track_id in enumerate(self.track_ids)}
+
     def evolved(self, tracks: Mapping[str, TrackRow], touched: set[str]) -> TrackArrays:
         """The columns after the touched tracks changed (retired ones leave, new ones join)."""
         if not touched:
             return self
-        position = {track_id: row for row, track_id in enumerate(self.track_ids)}
+        position = self.position
         changed = [t for t in (tracks[i] for i in touched) if t.lifecycle != "retired"]
         if len(changed) == len(touched) and all(t.track_id in position for t in changed):
             fresh = TrackArrays.of(changed)  # only rows updated in place: the common batch
@@ -100,7 +106,9 @@ class TrackArrays:
                 column = getattr(self, name).copy()
                 column[rows] = getattr(fresh, name)
                 columns[name] = column
-            return TrackArrays(self.track_ids, self.kinds, **columns)
+            updated = TrackArrays(self.track_ids, self.kinds, **columns)
+            updated.__dict__["position"] = position  # the same ids in the same rows
+            return updated
         keep = [i for i in self.track_ids if i not in touched]
         kept = np.array([position[i] for i in keep], dtype=np.intp)
         fresh = TrackArrays.of(changed)

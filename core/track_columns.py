@@ -31,7 +31,7 @@ class TrackColumns:
         self.ids = list(arrays.track_ids)
         self.kinds = list(arrays.kinds)
         self.centers = arrays.centers.copy()
-        self.row = {track_id: row for row, track_id in enumerate(self.ids)}
+        self.row = dict(arrays.position)  # its own: new hypotheses join it
         self.first_number = first_number
         self.from_scores = from_scores  # fusion.class_evidence_from_scores of the batch's params
         self.new_ids: list[str] = []
