@@ -201,7 +201,7 @@ def second_tracks(
     if not params.absorb_contained_tracks or count < 2:
         return {}
     live = ~arrays.gone & ~arrays.captured & ~arrays.missing
-    objects = live & (np.asarray(arrays.kinds) == "object")
+    objects = live & arrays.objects
     if eligible is not None:  # a track association may not match is not one either
         objects &= eligible
     rows = np.flatnonzero(objects)

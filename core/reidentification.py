@@ -116,7 +116,7 @@ def _unmatched_objects(columns: TrackColumns, eligible: BoolArray | None) -> Boo
     """The state's object tracks the front end may weigh here: not held by the capture ledger,
     eligible, and not matched in this batch."""
     arrays = columns.state.arrays
-    objects: BoolArray = (np.asarray(arrays.kinds) == "object") & ~arrays.captured
+    objects: BoolArray = arrays.objects & ~arrays.captured
     if eligible is not None:
         objects &= eligible
     for track_id in columns.observations:

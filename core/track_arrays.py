@@ -92,6 +92,13 @@ class TrackArrays:
         """Each track's row (read only: columns whose ids are the same share it)."""
         return {track_id: row for row, track_id in enumerate(self.track_ids)}
 
+    @cached_property
+    def objects(self) -> npt.NDArray[np.bool_]:
+        """Which rows are objects, not fixtures (read only: shared like `position`)."""
+        objects = np.array([kind == "object" for kind in self.kinds], dtype=np.bool_)
+        objects.flags.writeable = False
+        return objects
+
     def evolved(self, tracks: Mapping[str, TrackRow], touched: set[str]) -> TrackArrays:
         """The columns after the touched tracks changed (retired ones leave, new ones join)."""
         if not touched:
@@ -107,7 +114,10 @@ class TrackArrays:
                 column[rows] = getattr(fresh, name)
                 columns[name] = column
             updated = TrackArrays(self.track_ids, self.kinds, **columns)
-            updated.__dict__["position"] = position  # the same ids in the same rows
+            # The same ids and kinds in the same rows.
+            updated.__dict__["position"] = position
+            if "objects" in self.__dict__:
+                updated.__dict__["objects"] = self.objects
             return updated
         keep = [i for i in self.track_ids if i not in touched]
         kept = np.array([position[i] for i in keep], dtype=np.intp)

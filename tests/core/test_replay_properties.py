@@ -36,6 +36,8 @@ def test_replay_of_the_serialized_log_equals_the_live_state(steps: list[dict[str
     assert np.array_equal(derived.unpublished_tentative, built.unpublished_tentative)
     # Rows by id: handed on from batch to batch while the ids stay, built anew otherwise.
     assert derived.position == built.position == {t: r for r, t in enumerate(built.track_ids)}
+    kinds = [kind == "object" for kind in built.kinds]
+    assert derived.objects.tolist() == built.objects.tolist() == kinds
 
 
 @settings(max_examples=40, deadline=None)
