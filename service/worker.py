@@ -177,7 +177,7 @@ class Worker:
             with self._renewing(claim):
                 with metrics.timed(metrics.decide_seconds):
                     batch = self._batch(claim)
-                    state = self._state(claim.scene_id)
+                    state = self._state(claim.scene_id, claim.head_seq)
                     events = decide(state, batch)
                 with metrics.timed(metrics.append_seconds), container.uow.begin() as work:
                     appended = work.append(
@@ -382,9 +382,12 @@ class Worker:
             stop.set()
             beat.join()
 
-    def _state(self, scene_id: str) -> SceneState:
-        """The scene's state at its head: the cached one if nobody appended since, else loaded."""
-        head = self.container.log.scene(scene_id).head_seq
+    def _state(self, scene_id: str, head: int | None = None) -> SceneState:
+        """The scene's state at its head (`head` when the claim read it, else read here): the
+        cached one if nobody appended since, else loaded. A command appended after the claim
+        makes the append's head check fail, as one appended after a read here would."""
+        if head is None:
+            head = self.container.log.scene(scene_id).head_seq
         cached = self._states.get(scene_id)
         if cached is not None and cached.head_seq == head:
             self._states.move_to_end(scene_id)

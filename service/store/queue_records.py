@@ -101,6 +101,9 @@ class Claim:
     owner: str
     attempts: int
     blob_collected_at: float | None = None  # set only on a copy made by `pbdag repair`
+    # The scene's head when the batch was claimed (read in the claim's statement, so the worker
+    # need not read it again); None when not known (a lapsed lease's claim, a deleted scene).
+    head_seq: int | None = None
 
 
 @dataclass(frozen=True)

@@ -100,6 +100,23 @@ class TestQueue:
             work.complete(first, None)
         assert self.claim(container, "w3", 30).batch_id == "a2"
 
+    def test_a_claim_carries_its_scene_s_head_at_the_claim(self, container: Container) -> None:
+        scene = new_scene(container)
+        self.submit(container, scene.id, "b1")
+        self.submit(container, scene.id, "b2")
+        first = self.claim(container, "w", 30)
+        assert first.head_seq == container.log.scene(scene.id).head_seq == 0
+        state = container.log.load_state(scene.id)
+        with container.uow.begin() as work:
+            appended = work.append(scene.id, state, [added("trk-000001")], batch_id="b1")
+            work.complete(first, appended.seqs)
+        second = self.claim(container, "w", 30)
+        assert second.head_seq == 1
+        # A claim the queue hands back after its lease lapsed does not know the head.
+        later = container.queue.clock() + 60
+        container.queue.clock = lambda: later
+        assert [(c.batch_id, c.head_seq) for c in container.queue.expired()] == [("b2", None)]
+
     def test_completion_is_fenced_by_the_lease(self, container: Container) -> None:
         scene = new_scene(container)
         self.submit(container, scene.id, "b1")

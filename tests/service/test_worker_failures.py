@@ -88,7 +88,7 @@ def test_a_dead_batch_error_is_short_and_names_nothing_internal(
 def test_a_passing_failure_backs_off_then_succeeds(
     client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The database fails once while the worker reads the scene (the driver's own
+    """The database fails once while the worker loads the scene's state (the driver's own
     OperationalError, raised where the driver raises it): the store's adapter translates it,
     and the worker retries."""
     scene_id = new_scene(client)
@@ -96,21 +96,25 @@ def test_a_passing_failure_backs_off_then_succeeds(
     dbapi = container.engine.dialect.dbapi
     assert dbapi is not None
     failures: list[Exception] = []
-    real_scene, reads = container.log.scene, 0
+    real_load, reads = container.log.load_state, 0
 
-    def scene_failing_once(scene_id: str, connection: Any = None) -> Any:
+    def load_failing_once(scene_id: str, as_of: int | None = None) -> Any:
         nonlocal reads
         reads += 1
         if reads == 1:
             failures.append(dbapi.OperationalError("the database is unavailable"))
-        return real_scene(scene_id, connection)
+        return real_load(scene_id, as_of)
 
     @sa.event.listens_for(container.engine, "before_cursor_execute")
     def fail_when_armed(*_: Any) -> None:
         if failures:
             raise failures.pop()
 
-    monkeypatch.setattr(container.log, "scene", scene_failing_once)
+    monkeypatch.setattr(container.log, "load_state", load_failing_once)
+    # The queue's clock stands still, so the retry's backoff (0.3 s) cannot run out within
+    # this drain however slowly the machine runs.
+    start = time.time()
+    monkeypatch.setattr(container.queue, "clock", lambda: start)
 
     worker = Worker(container, seed=1)
     assert worker.drain() == 1
@@ -298,3 +302,31 @@ def test_expired_leases_are_looked_for_once_every_third_of_a_lease(
     assert looked[-1] == 1035.0
     settled = status(client, scene_id, "b0")
     assert settled["status"] == "failed" and "lease expired" in settled["error"]
+
+
+def test_a_command_appended_after_the_claim_makes_the_batch_retry_on_the_new_head(
+    client: TestClient, container: Container, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The claim reads the scene's head, and the worker keeps the state it folded last; a
+    rename appended after the claim moves the head, so the batch's append refuses the kept
+    state (nothing written), and the retry decides on the new head."""
+    scene_id = new_scene(client)
+    worker = Worker(container, seed=1)
+    post(client, scene_id, "b0")
+    assert worker.drain() == 1
+    head = container.log.scene(scene_id).head_seq
+    post(client, scene_id, "b1")
+    claim = container.queue.claim("w", 30)
+    assert claim is not None and claim.head_seq == head
+    renamed = client.patch(f"/v1/scenes/{scene_id}", json={"name": "after the claim"})
+    assert renamed.status_code == 200 and renamed.json()["head_seq"] == head + 1
+    worker.process(claim)
+    failed = status(client, scene_id, "b1")
+    assert failed["status"] == "failed" and "ConcurrencyConflict" in failed["error"]
+    assert container.log.scene(scene_id).head_seq == head + 1  # nothing of the batch appended
+    now = time.time() + 120
+    monkeypatch.setattr(container.queue, "clock", lambda: now)
+    assert worker.drain() == 1
+    assert status(client, scene_id, "b1")["status"] == "done"
+    state = container.log.load_state(scene_id)
+    assert state.name == "after the claim" and state.head_seq > head + 1
