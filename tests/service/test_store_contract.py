@@ -4,13 +4,15 @@
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
+import orjson
 import pytest
 import sqlalchemy as sa
 
 from core.errors import StateConflict
-from core.events import Event
+from core.events import Event, ObjectAdded
 from core.params import Params
 from core.state import SceneState
 from service.bootstrap import Container
@@ -25,7 +27,7 @@ from service.store.errors import (
 )
 from service.store.projection import rebuild_scene
 from service.store.snapshot_codec import SNAPSHOT_VERSION
-from service.store.tables import snapshots, tracks
+from service.store.tables import events, snapshots, tracks
 from tests.service.minimal_events import added, append_batch, missed, new_scene
 
 
@@ -68,6 +70,12 @@ def test_every_batch_size_stores_the_same_rows_and_conflicts_on_a_stale_head(
     scene = new_scene(container)
     batch: list[Event] = [added(f"trk-{i:06d}", float(i)) for i in range(1, size + 1)]
     batch[0] = missed("trk-000001", 0.25, 0)  # a row with no observation, in the same batch
+    # Text that JSON and SQL both escape, and text beyond ASCII, in a column and in details.
+    tricky = 'f "1" \\ \u00e9\u2713\n\t[null]'
+    last = batch[-1]
+    if isinstance(last, ObjectAdded):
+        last = replace(last, observations=(replace(last.observations[0], frame_id=tricky),))
+    batch[-1] = replace(last, frame_id=tricky)
     clock = container.log.clock
     with write_transaction(container.engine) as connection:
         assert container.log.append(connection, scene.id, 0, batch, "b-1") == (1, size)
@@ -90,6 +98,13 @@ def test_every_batch_size_stores_the_same_rows_and_conflicts_on_a_stale_head(
         assert row.details == event.details()
         assert row.to_core() == event
         assert abs(row.recorded_at - clock()) < 60
+    # The details column holds the event's JSON text exactly.
+    with container.engine.connect() as connection:
+        text = connection.execute(
+            sa.select(events.c.details).where(events.c.scene_id == scene.id, events.c.seq == size)
+        ).scalar_one()
+    assert text == orjson.dumps(batch[-1].details()).decode()
+    assert size == 1 or orjson.dumps(tricky).decode() in text
 
 
 def test_two_writers_at_one_head_one_waits_then_conflicts(container: Container) -> None:
