@@ -43,16 +43,16 @@ SQLITE_INSERT = (
 )
 
 # The append on PostgreSQL: the conditional head update and the insert of the rows (each
-# column a JSON array of its values, read back in order) in one statement. When the head is not
-# the expected one the update matches nothing and no row is inserted; the updated scene row stays
-# locked until commit, so writers of one scene are serialized and the seq stays gapless and
-# commit-ordered. Measured against the update then an executemany of the rows: 1.4 times the
-# events per second in batches of 20, slower from about 100 on, so larger batches take the two
-# statements. The columns go as JSON text rather than as text[] parameters: psycopg builds an
-# array parameter element by element in Python (about 0.8 ms of a worker's CPU for a batch of
-# 25 events of 1 kB), orjson a JSON array in one call; `json_array_elements_text` gives each
-# string back exactly as it was, and a JSON null as NULL.
-ONE_STATEMENT_MAX = 32
+# column a JSON array of its values, read back in order) in one statement, one round trip, for
+# a batch of any size. When the head is not the expected one the update matches nothing and no
+# row is inserted; the updated scene row stays locked until commit, so writers of one scene are
+# serialized and the seq stays gapless and commit-ordered. The columns go as JSON text rather
+# than as text[] parameters, which psycopg builds element by element in Python (about 0.8 ms of
+# a worker's CPU for a batch of 25 events of 1 kB, and slower than a head update then an
+# executemany from about 100 rows on); `json_array_elements_text` gives each string back
+# exactly, and a JSON null as NULL. `python -m bench.bench_store versus`, interleaved with the
+# library: 1.27-1.29x at batches of 1, 1.66x at 20, 2.12x at 500 (text[] parameters up to 32
+# rows, then the two statements: 1.00-1.11x, 1.11-1.13x, 1.50-1.60x, the same day).
 ARRAY_COLUMNS = ("type", "track_id", "state", "frame_id", "details")
 ARRAY_POSITIONS = tuple((column, EVENT_COLUMNS.index(column)) for column in ARRAY_COLUMNS)
 POSTGRES_APPEND = sa.text(
@@ -77,12 +77,6 @@ POSTGRES_APPEND = sa.text(
     ) WITH ORDINALITY AS row(type, track_id, state, frame_id, details, n)
     """
 )
-# Larger batches on PostgreSQL: the head update (notifying at commit), then the rows.
-POSTGRES_HEAD_UPDATE = sa.text(
-    "UPDATE scenes SET head_seq = head_seq + :count "
-    "WHERE id = CAST(:scene_id AS text) AND head_seq = :expected "
-    "RETURNING pg_notify(CAST(:channel AS text), CAST(:scene_id AS text))"
-)
 
 
 def insert_rows(
@@ -98,9 +92,7 @@ def insert_rows(
     caller's write transaction; ConcurrencyConflict (nothing written) when the head moved.
     PostgreSQL: the listeners of EVENTS_CHANNEL are told the scene's id at commit."""
     count = len(rows)
-    dialect = connection.dialect.name
-    if dialect == "postgresql" and count <= ONE_STATEMENT_MAX:
-        # One statement, one round trip: the head update gates the insert of every row.
+    if connection.dialect.name == "postgresql":
         inserted = connection.execute(
             POSTGRES_APPEND,
             {
@@ -120,21 +112,13 @@ def insert_rows(
         if inserted != count:
             raise _moved(scene_id, expected_head)
         return
-    if dialect == "sqlite":
-        # On the driver's own connection: SQLAlchemy's execution costs more CPU than SQLite's
-        # work for a batch of one (`bench.bench_store versus`); its errors are raised as
-        # SQLAlchemy's would be (sqlite_execute).
-        head = (count, scene_id, expected_head)
-        if sqlite_execute(connection, SQLITE_HEAD_UPDATE, head).rowcount != 1:
-            raise _moved(scene_id, expected_head)
-        sqlite_execute(connection, SQLITE_INSERT, rows, many=True)
-        return
-    moved = {"scene_id": scene_id, "expected": expected_head, "count": count}
-    if connection.execute(POSTGRES_HEAD_UPDATE, {**moved, "channel": EVENTS_CHANNEL}).rowcount != 1:
+    # SQLite, on the driver's own connection: SQLAlchemy's execution costs more CPU than
+    # SQLite's work for a batch of one (`bench.bench_store versus`); its errors are raised as
+    # SQLAlchemy's would be (sqlite_execute).
+    head = (count, scene_id, expected_head)
+    if sqlite_execute(connection, SQLITE_HEAD_UPDATE, head).rowcount != 1:
         raise _moved(scene_id, expected_head)
-    connection.execute(
-        events.insert(), [dict(zip(EVENT_COLUMNS, row, strict=True)) for row in rows]
-    )
+    sqlite_execute(connection, SQLITE_INSERT, rows, many=True)
 
 
 def _moved(scene_id: str, expected_head: int) -> ConcurrencyConflict:

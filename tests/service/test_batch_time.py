@@ -16,7 +16,6 @@ from alembic.migration import MigrationContext
 from core.params import Params
 from service.bootstrap import Container
 from service.commands import create_scene
-from service.store.append_sql import ONE_STATEMENT_MAX
 from service.store.engine import MIGRATIONS_DIR, make_engine
 from service.store.errors import NonFiniteEvent
 from service.store.tables import events, metadata
@@ -39,7 +38,7 @@ def test_a_batchs_events_carry_its_time_and_commands_none(container: Container) 
         container, scene.id, [added("trk-000001"), added("trk-000002", 2.0)], "b1", 10.0
     ) == (1, 2)
     assert append_batch(container, scene.id, [missed("trk-000001", 0.2, 1)], None) == (3, 3)
-    many = [added(f"trk-{i:06d}", float(i)) for i in range(3, 3 + ONE_STATEMENT_MAX + 8)]
+    many = [added(f"trk-{i:06d}", float(i)) for i in range(3, 43)]
     first, last = append_batch(container, scene.id, many, "b2", 20.0) or (0, 0)
     assert batch_times(container, scene.id) == [
         (0, None),

@@ -22,7 +22,6 @@ from pbdag_client import Client, InvalidRequest
 from service.app import create_app
 from service.bootstrap import Container, build_container
 from service.settings import Settings
-from service.store.append_sql import ONE_STATEMENT_MAX
 from service.store.engine import write_transaction
 from service.store.errors import ConcurrencyConflict, StoreUnavailable
 from service.store.notifications import EVENTS_CHANNEL
@@ -330,8 +329,8 @@ def test_on_postgres_each_append_notifies_its_scene_once_at_commit_and_a_stale_o
         driver.execute(f"LISTEN {EVENTS_CHANNEL}")
         scene = Scene(container)
         stale = scene.state
-        many = [added(f"trk-{index}") for index in range(1, 1 + ONE_STATEMENT_MAX + 8)]
-        for batch in ([added("trk-a")], many):  # one statement, and the head update then rows
+        many = [added(f"trk-{index}") for index in range(1, 41)]
+        for batch in ([added("trk-a")], many):  # one event, and a batch of forty
             scene.append(*batch)
         with pytest.raises(ConcurrencyConflict), container.uow.begin() as work:
             work.append(scene.id, stale, [added("trk-late")])

@@ -18,7 +18,6 @@ from core.state import SceneState
 from service.bootstrap import Container
 from service.commands import run_command
 from service.settings import Settings
-from service.store.append_sql import ONE_STATEMENT_MAX
 from service.store.engine import make_engine, write_transaction
 from service.store.errors import (
     ConcurrencyConflict,
@@ -63,7 +62,7 @@ def test_append_is_gapless_and_conflicts_on_a_stale_head(container: Container) -
     assert [e.seq for e in container.log.read(scene.id)] == [0, 1, 2, 3]
 
 
-@pytest.mark.parametrize("size", [1, ONE_STATEMENT_MAX, ONE_STATEMENT_MAX + 1, 200])
+@pytest.mark.parametrize("size", [1, 20, 500])
 def test_every_batch_size_stores_the_same_rows_and_conflicts_on_a_stale_head(
     container: Container, size: int
 ) -> None:
