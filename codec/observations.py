@@ -8,6 +8,7 @@ import base64
 import binascii
 import io
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,13 +56,23 @@ class InputLimits:
 MAX_POSE_TRANSLATION_M = 10_000.0
 
 
-def decode_batch(batch: BatchIn, limits: InputLimits | None = None) -> Batch:
-    """Decode every frame of a batch; raise `InvalidObservation` on the first bad field."""
-    return Batch(batch_id=batch.batch_id, frames=decode_frames(batch.frames, "frames", limits))
+def decode_batch(
+    batch: BatchIn,
+    limits: InputLimits | None = None,
+    depth_bytes: Mapping[int, bytes] | None = None,
+) -> Batch:
+    """Decode every frame of a batch; raise `InvalidObservation` on the first bad field.
+    `depth_bytes`: frames whose depth is given as its bytes, by index, instead of the base64 of
+    their `depth.data` (a stored batch, `service.store.raw_batches.raw_batch_parts`)."""
+    frames = decode_frames(batch.frames, "frames", limits, depth_bytes)
+    return Batch(batch_id=batch.batch_id, frames=frames)
 
 
 def decode_frames(
-    frames: list[FrameIn], path: str = "frames", limits: InputLimits | None = None
+    frames: list[FrameIn],
+    path: str = "frames",
+    limits: InputLimits | None = None,
+    depth_bytes: Mapping[int, bytes] | None = None,
 ) -> tuple[Frame, ...]:
     """Decode a list of frames (a batch, an inspection's views); the error names the field.
 
@@ -79,7 +90,8 @@ def decode_frames(
     decoded = []
     covered = 0
     for index, frame in enumerate(frames):
-        decoded.append(_decode_frame(frame, f"{path}[{index}]"))
+        raw = None if depth_bytes is None else depth_bytes.get(index)
+        decoded.append(_decode_frame(frame, f"{path}[{index}]", raw))
         for number, detection in enumerate(decoded[-1].detections):
             covered += detection.mask.area
             if covered > limits.max_mask_pixels_per_batch:
@@ -152,11 +164,12 @@ def _check_limits(frame: FrameIn, path: str, limits: InputLimits) -> None:
             )
 
 
-def _decode_frame(frame: FrameIn, path: str) -> Frame:
+def _decode_frame(frame: FrameIn, path: str, depth_bytes: bytes | None = None) -> Frame:
     """Decode one frame: pose, depth, then each detection against the depth size."""
     intrinsics = Intrinsics(**frame.intrinsics.model_dump())
     pose = _decode_pose(frame.pose, f"{path}.pose")
-    depth = _decode_depth(frame.depth, (intrinsics.height, intrinsics.width), f"{path}.depth")
+    shape = (intrinsics.height, intrinsics.width)
+    depth = _decode_depth(frame.depth, shape, f"{path}.depth", depth_bytes)
     detections = tuple(
         _decode_detection(detection, depth.shape, f"{path}.detections[{index}]")
         for index, detection in enumerate(frame.detections)
@@ -201,10 +214,12 @@ def _decode_pose(rows: list[list[float]], path: str) -> npt.NDArray[np.float64]:
 
 
 def _decode_depth(
-    depth: DepthImage, expected_shape: tuple[int, int], path: str
+    depth: DepthImage, expected_shape: tuple[int, int], path: str, raw: bytes | None = None
 ) -> npt.NDArray[np.float32]:
-    """Decode depth to float32 metres with 0 marking invalid pixels."""
-    raw = _decode_base64(depth.data, f"{path}.data")
+    """Decode depth to float32 metres with 0 marking invalid pixels (from `raw`, its bytes,
+    when given, else from the base64 of `depth.data`)."""
+    if raw is None:
+        raw = _decode_base64(depth.data, f"{path}.data")
     if depth.encoding == "png16":
         metres = _decode_png16(raw, depth.scale, expected_shape, path)
     else:

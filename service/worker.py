@@ -26,6 +26,7 @@ from collections import OrderedDict
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+import orjson
 import pydantic
 
 from api_schema import BatchIn
@@ -45,7 +46,7 @@ from service.store.errors import (
     StoreUnavailable,
 )
 from service.store.queue_records import Claim, RawBatchCollected
-from service.store.raw_batches import decode_raw_batch
+from service.store.raw_batches import raw_batch_parts
 
 logger = logging.getLogger("pbdag.worker")
 
@@ -235,10 +236,11 @@ class Worker:
         if handed is not None:
             self.container.metrics.batches_handed_off.inc()
             return handed
-        body = decode_raw_batch(self._raw_body(claim))
-        return decode_batch(
-            BatchIn.model_validate_json(body), self.container.settings.input_limits()
-        )
+        # The body without its depth, validated as the API validated it (JSON), and the depth
+        # decoded from its stored bytes: not base64-encoded into the body to be decoded again.
+        body, depths = raw_batch_parts(self._raw_body(claim))
+        wire = BatchIn.model_validate_json(orjson.dumps(body))
+        return decode_batch(wire, self.container.settings.input_limits(), depths)
 
     def _raw_body(self, claim: Claim) -> bytes:
         """The stored batch; RawBatchCollected when `pbdag gc` deleted it (a copy made by

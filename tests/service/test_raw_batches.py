@@ -15,13 +15,17 @@ from hypothesis import strategies as st
 
 from api_schema import BatchIn
 from codec.canonical import canonical_json
+from codec.observations import decode_batch
+from core.observation import Batch
 from service.store.blobs import BlobNotFound, BlobStore, FileBlobStore, MemoryBlobStore
 from service.store.raw_batches import (
     COMPACT_MARKER,
+    SECTION_DEPTH,
     RawBatchUnreadable,
     decode_raw_batch,
     encode_raw_batch,
     raw_batch_format,
+    raw_batch_parts,
 )
 from tests.wire_scenes import batch
 
@@ -101,6 +105,43 @@ def test_depth_text_that_is_not_canonical_base64_is_kept_as_text() -> None:
     restored = orjson.loads(decode_raw_batch(stored))
     assert [f["depth"]["data"] for f in restored["frames"]] == [canonical_depth, "QR=="]
     assert decode_raw_batch(stored) == canonical_json(body)
+
+
+def same_batch(a: Batch, b: Batch) -> bool:
+    """Two decoded batches hold the same frames: ids, poses, depth and detections."""
+    return a.batch_id == b.batch_id and all(
+        (f.frame_id, f.timestamp, f.intrinsics) == (g.frame_id, g.timestamp, g.intrinsics)
+        and (f.pose == g.pose).all()
+        and f.depth.tobytes() == g.depth.tobytes()
+        and [(d.label, d.score, d.mask.runs.tolist()) for d in f.detections]
+        == [(d.label, d.score, d.mask.runs.tolist()) for d in g.detections]
+        for f, g in zip(a.frames, b.frames, strict=True)
+    )
+
+
+def test_the_parts_of_a_stored_batch_decode_to_the_batch_its_json_decodes_to() -> None:
+    """The worker's path (the body with its depth as bytes) and the canonical JSON's: the same
+    batch, for two frames whose depth a compact blob keeps in sections, and for the JSON format
+    of older data dirs."""
+    body = BatchIn.model_validate(batch("b1", 1)).model_dump(mode="json")
+    body["frames"].append({**body["frames"][0], "frame_id": "second"})
+    for blob in (encode_raw_batch(body, "s"), canonical_json(body)):
+        parts, depths = raw_batch_parts(blob)
+        assert sorted(depths) == ([0, 1] if blob.startswith(COMPACT_MARKER) else [])
+        assert all(parts["frames"][i]["depth"]["data"] == SECTION_DEPTH for i in depths)
+        direct = decode_batch(BatchIn.model_validate_json(orjson.dumps(parts)), None, depths)
+        whole = decode_batch(BatchIn.model_validate_json(decode_raw_batch(blob)))
+        assert same_batch(direct, whole)
+        assert direct.frames[0].depth.any()  # the depth itself, not the placeholder's
+
+
+def test_depth_kept_as_text_in_a_compact_blob_is_decoded_from_the_text() -> None:
+    body = BatchIn.model_validate(batch("b1", 1)).model_dump(mode="json")
+    text = body["frames"][0]["depth"]["data"]
+    # Not the canonical base64 of any bytes (a newline inside): the blob keeps it as text.
+    body["frames"][0]["depth"]["data"] = text[:8] + "\n" + text[8:]
+    parts, depths = raw_batch_parts(encode_raw_batch(body, "s"))
+    assert depths == {} and parts["frames"][0]["depth"]["data"] == text[:8] + "\n" + text[8:]
 
 
 def test_the_json_format_of_older_data_dirs_still_decodes() -> None:
