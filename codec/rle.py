@@ -70,34 +70,35 @@ def _runs_of(codes: npt.NDArray[np.uint8]) -> tuple[npt.NDArray[np.int64], int]:
     return runs[:count].copy(), 0
 
 
-def compressed_rle_counts(counts: str) -> npt.NDArray[np.int64]:
-    """Run lengths of a compressed COCO RLE string (pycocotools' `rleFrString`).
-
-    Raises ValueError with a plain reason when the string is not a valid encoding.
-    """
+def _codes_of(counts: str) -> npt.NDArray[np.uint8]:
+    """The string's character codes; ValueError when it is not ASCII or is empty."""
     try:
         codes = np.frombuffer(counts.encode("ascii"), dtype=np.uint8)
     except UnicodeEncodeError:
         raise ValueError("compressed RLE must be ASCII") from None
     if codes.size == 0:
         raise ValueError("compressed RLE is empty")
-    runs, fault = _runs_of(codes)
+    return codes
+
+
+def compressed_rle_counts(counts: str) -> npt.NDArray[np.int64]:
+    """Run lengths of a compressed COCO RLE string (pycocotools' `rleFrString`).
+
+    Raises ValueError with a plain reason when the string is not a valid encoding.
+    """
+    runs, fault = _runs_of(_codes_of(counts))
     if fault:
         raise ValueError(_FAULTS[fault])
     return runs
 
 
 def compressed_rle_counts_numpy(counts: str) -> npt.NDArray[np.int64]:
-    """Run lengths of a compressed COCO RLE string (pycocotools' `rleFrString`, vectorized).
+    """Run lengths of a compressed COCO RLE string (pycocotools' `rleFrString`, vectorized):
+    the rule `compressed_rle_counts` computes, kept as its tests' reference.
 
     Raises ValueError with a plain reason when the string is not a valid encoding.
     """
-    try:
-        codes = np.frombuffer(counts.encode("ascii"), dtype=np.uint8)
-    except UnicodeEncodeError:
-        raise ValueError("compressed RLE must be ASCII") from None
-    if codes.size == 0:
-        raise ValueError("compressed RLE is empty")
+    codes = _codes_of(counts)
     if codes.min() < _RLE_FIRST_CHAR or codes.max() > _RLE_LAST_CHAR:
         raise ValueError("compressed RLE contains characters outside '0'..'o'")
     groups = codes.astype(np.int64) - _RLE_FIRST_CHAR
